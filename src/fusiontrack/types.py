@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import itertools
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -107,6 +108,9 @@ class LaserScan:
         from the sensor x-axis).
     intensities : (n_beams,) float32 or (0,)
         Return intensities; empty when the sensor gives none.
+    angle_max_rad : float
+        As recorded (ROS ``angle_max``); some drivers report the end of the field of view rather than
+        the last beam's angle, so beam angles are always ``angle_min_rad + i * angle_increment_rad``.
     """
 
     t_ns: int
@@ -120,27 +124,26 @@ class LaserScan:
     intensities: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     time_increment_s: float = 0.0
     scan_time_s: float = 0.0
+    angle_max_rad: float | None = None
 
     def __post_init__(self) -> None:
         _set(self, "t_ns", _check_time(self.t_ns))
+        if self.angle_max_rad is None:  # ROS: angle of the last beam
+            _set(self, "angle_max_rad", self.angle_min_rad + (np.size(self.ranges_m) - 1) * self.angle_increment_rad)
         _set(self, "ranges_m", _frozen_array(self.ranges_m, np.float32, (None,), "LaserScan.ranges_m"))
         _set(self, "intensities", _frozen_array(self.intensities, np.float32, (None,), "LaserScan.intensities"))
         if self.intensities.size not in (0, self.ranges_m.size):
             raise ValueError(
                 f"LaserScan.intensities: expected 0 or {self.ranges_m.size} values, got {self.intensities.size}"
             )
+        # sensor_msgs/LaserScan stores these as float32: hold exactly what a recording can hold.
         for name in ("angle_min_rad", "angle_increment_rad", "range_min_m", "range_max_m",
-                     "time_increment_s", "scan_time_s"):
-            _set(self, name, float(getattr(self, name)))
+                     "time_increment_s", "scan_time_s", "angle_max_rad"):
+            _set(self, name, float(np.float32(getattr(self, name))))
 
     @property
     def n_beams(self) -> int:
         return int(self.ranges_m.size)
-
-    @property
-    def angle_max_rad(self) -> float:
-        """Angle of the last beam (as ROS ``angle_max``)."""
-        return self.angle_min_rad + (self.n_beams - 1) * self.angle_increment_rad
 
     def angles_rad(self) -> np.ndarray:
         """Beam angles, ``(n_beams,) float64``."""
@@ -499,7 +502,7 @@ class Track:
         states = tuple(self.states)
         if any(s.track_id != self.track_id for s in states):
             raise ValueError(f"Track {self.track_id}: every state must carry track_id {self.track_id}")
-        if any(b.t_ns < a.t_ns for a, b in zip(states, states[1:], strict=False)):
+        if any(b.t_ns < a.t_ns for a, b in itertools.pairwise(states)):
             raise ValueError(f"Track {self.track_id}: states must be in time order")
         _set(self, "states", states)
 

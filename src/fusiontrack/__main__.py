@@ -1,0 +1,3 @@
+from fusiontrack.cli import main
+
+main()

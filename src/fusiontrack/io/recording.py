@@ -1,0 +1,338 @@
+"""Reading recordings: ROS 1 bags and ROS 2 bags (sqlite3 and MCAP), one reader over several files.
+
+Each file is opened with its own ``rosbags`` :class:`~rosbags.highlevel.AnyReader`, so ROS 1 and
+ROS 2 files can be mixed; their streams are merged by log time with :func:`heapq.merge`. Messages
+are converted into fusiontrack records (:mod:`fusiontrack.io.ros`) lazily, one at a time.
+
+Time: a record's ``t_ns`` is its header stamp (the capture time on the sensor's clock) unless
+``time_source="log"`` is asked for, or the message has no header (then the log time is used).
+Header stamps of different sensors may disagree with each other and come out of order; put them
+on one clock and in order with :mod:`fusiontrack.io.sync`.
+"""
+
+from __future__ import annotations
+
+import heapq
+import json
+import logging
+from collections import Counter
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from rosbags.highlevel import AnyReader
+from rosbags.interfaces import Connection
+
+from ..errors import MessageTypeError, RecordingError, TopicError
+from ..types import Message
+from .ros import FROM_ROS, HEADERLESS, build_typestore, parse_definitions, stamp_to_ns
+
+log = logging.getLogger(__name__)
+
+SENSOR_MAP_KEY = "fusiontrack.sensors"
+"""Key of the topic -> sensor map that fusiontrack's writer stores in a rosbag2 recording."""
+
+TimeSource = Literal["header", "log"]
+
+
+@dataclass(frozen=True, slots=True)
+class TopicInfo:
+    """What a topic holds: its type, how many messages, over what span of log time."""
+
+    topic: str
+    msgtype: str
+    count: int
+    t_start_ns: int
+    t_end_ns: int
+    sensor: str
+    convertible: bool
+
+    @property
+    def duration_s(self) -> float:
+        return (self.t_end_ns - self.t_start_ns) / 1e9
+
+    @property
+    def rate_hz(self) -> float:
+        """Mean message rate; 0 for fewer than two messages."""
+        span = self.t_end_ns - self.t_start_ns
+        return (self.count - 1) / (span / 1e9) if self.count > 1 and span > 0 else 0.0
+
+
+def _describe_open_error(path: Path, err: BaseException) -> str:
+    text = " ".join(str(a) for a in err.args) or type(err).__name__
+    if path.is_file() and path.suffix not in (".bag", ".mcap", ".db3"):
+        return (f"{path}: not a recording fusiontrack can open (expected a ROS 1 .bag, a ROS 2 bag folder, "
+                f"a .mcap or a .db3 file): {text}")
+    return f"{path}: cannot open the recording ({text}); is it complete and not corrupt?"
+
+
+class Recording:
+    """One or several recording files read as a single time-ordered stream.
+
+    Parameters
+    ----------
+    paths : path or sequence of paths
+        ROS 1 ``.bag`` files, ROS 2 bag folders, ``.mcap`` or ``.db3`` files, in any mix.
+    custom_types : mapping of message type -> definition (ROS .msg syntax), optional
+        Types to register before deserialising, for recordings that do not embed their definitions
+        (e.g. ``{"leg_tracker/msg/Person": "geometry_msgs/Pose pose\\nuint32 id"}``).
+    sensors : mapping of topic -> sensor name, optional
+        The ``sensor`` written into each record; by default the name stored in the recording by
+        fusiontrack's writer, else the topic name.
+
+    Use as a context manager, or call :meth:`close`.
+    """
+
+    def __init__(
+        self,
+        paths: str | Path | Sequence[str | Path],
+        *,
+        custom_types: Mapping[str, str] | None = None,
+        sensors: Mapping[str, str] | None = None,
+    ) -> None:
+        if isinstance(paths, str | Path):
+            paths = [paths]
+        self.paths = [Path(p) for p in paths]
+        if not self.paths:
+            raise RecordingError("no recording given: expected at least one bag, MCAP or db3 path")
+        missing = [str(p) for p in self.paths if not p.exists()]
+        if missing:
+            raise RecordingError(f"recording not found: {', '.join(missing)}")
+        self._custom_fields = parse_definitions(custom_types or {})
+        default_typestore = build_typestore(custom_types)
+        self._readers: list[AnyReader] = []
+        sensor_map: dict[str, str] = {}
+        try:
+            for path in self.paths:
+                try:
+                    reader = AnyReader([path], default_typestore=default_typestore)
+                    reader.open()
+                except Exception as err:  # rosbags raises its own, OSError, struct and yaml errors
+                    raise RecordingError(_describe_open_error(path, err)) from err
+                self._readers.append(reader)
+                self._register_custom(reader, path)
+                sensor_map.update(self._stored_sensor_map(reader))
+        except BaseException:
+            self.close()
+            raise
+        sensor_map.update(sensors or {})
+        self._sensor_map = sensor_map
+        self._topics: dict[str, TopicInfo] | None = None
+        self.skipped: Counter[str] = Counter()
+        """Messages skipped by the last :meth:`messages` pass, per topic."""
+
+    # ---------------------------------------------------------------------------------------------
+    def _register_custom(self, reader: AnyReader, path: Path) -> None:
+        """Add user-given type definitions to a reader's typestore (bag definitions take precedence)."""
+        new = {k: v for k, v in self._custom_fields.items() if k not in reader.typestore.fielddefs}
+        if new:
+            try:
+                reader.typestore.register(new)
+            except Exception as err:
+                raise MessageTypeError(f"{path}: cannot register custom types {sorted(new)}: {err}") from err
+
+    @staticmethod
+    def _stored_sensor_map(reader: AnyReader) -> dict[str, str]:
+        out: dict[str, str] = {}
+        for sub in reader.readers:
+            metadata = getattr(getattr(sub, "storage", None), "metadata", None)  # rosbag2 only
+            custom = getattr(metadata, "custom", None) or {}
+            if SENSOR_MAP_KEY in custom:
+                try:
+                    out.update(json.loads(custom[SENSOR_MAP_KEY]))
+                except (ValueError, TypeError):
+                    log.warning("ignoring an unreadable %s entry in %s", SENSOR_MAP_KEY, sub.path)
+        return out
+
+    def close(self) -> None:
+        for reader in self._readers:
+            try:
+                reader.close()
+            except Exception:  # closing must not hide the error that made us close
+                log.debug("error while closing a reader", exc_info=True)
+        self._readers = []
+
+    def __enter__(self) -> Recording:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ---------------------------------------------------------------------------------------------
+    @property
+    def connections(self) -> list[Connection]:
+        return [c for r in self._readers for c in r.connections]
+
+    def sensor_of(self, topic: str) -> str:
+        return self._sensor_map.get(topic, topic)
+
+    @property
+    def message_count(self) -> int:
+        return sum(c.msgcount for c in self.connections)
+
+    @property
+    def start_ns(self) -> int:
+        return min(r.start_time for r in self._readers)
+
+    @property
+    def end_ns(self) -> int:
+        return max(r.end_time for r in self._readers)
+
+    @property
+    def duration_s(self) -> float:
+        return max(self.end_ns - self.start_ns, 0) / 1e9
+
+    def topics(self) -> dict[str, TopicInfo]:
+        """Every topic with its type, count and log-time span (read from the index where there is one)."""
+        if self._topics is None:
+            stats: dict[str, list[int]] = {}
+            types: dict[str, str] = {}
+            for conn in self.connections:
+                types.setdefault(conn.topic, conn.msgtype)
+                times = self._index_times(conn)
+                if times is None:
+                    break
+                s = stats.setdefault(conn.topic, [0, 2**63 - 1, 0])
+                if times.size:
+                    s[0] += int(times.size)
+                    s[1] = min(s[1], int(times.min()))
+                    s[2] = max(s[2], int(times.max()))
+            else:
+                self._topics = self._make_topics(stats, types)
+                return self._topics
+            # No index to read (ROS 2 storage): one pass over the raw stream, nothing deserialised.
+            stats = {}
+            for conn, t_ns, _ in self._raw():
+                s = stats.setdefault(conn.topic, [0, t_ns, t_ns])
+                s[0] += 1
+                s[1] = min(s[1], t_ns)
+                s[2] = max(s[2], t_ns)
+            self._topics = self._make_topics(stats, types)
+        return self._topics
+
+    def _make_topics(self, stats: dict[str, list[int]], types: dict[str, str]) -> dict[str, TopicInfo]:
+        out = {}
+        for topic, msgtype in sorted(types.items()):
+            count, t0, t1 = stats.get(topic, [0, 0, 0])
+            if count == 0:
+                t0 = t1 = 0
+            out[topic] = TopicInfo(topic, msgtype, count, t0, t1, self.sensor_of(topic), msgtype in FROM_ROS)
+        return out
+
+    @staticmethod
+    def _index_times(conn: Connection) -> np.ndarray | None:
+        """Log times of a ROS 1 connection from the bag's index, without reading messages."""
+        indexes = getattr(conn.owner, "indexes", None)
+        if indexes is None or conn.id not in indexes:
+            return None
+        return np.fromiter((ix.time for ix in indexes[conn.id]), dtype=np.int64)
+
+    # ---------------------------------------------------------------------------------------------
+    def _select(self, topics: Iterable[str] | None, convertible_only: bool) -> list[Connection]:
+        conns = self.connections
+        if topics is None:
+            return [c for c in conns if c.msgtype in FROM_ROS] if convertible_only else conns
+        wanted = list(dict.fromkeys(topics))
+        have = {c.topic for c in conns}
+        unknown = [t for t in wanted if t not in have]
+        if unknown:
+            raise TopicError(
+                f"topic {', '.join(map(repr, unknown))} not in {', '.join(str(p) for p in self.paths)}; "
+                f"it has: {', '.join(sorted(have)) or 'no topics'}"
+            )
+        chosen = [c for c in conns if c.topic in set(wanted)]
+        if convertible_only:
+            bad = sorted({f"{c.topic} ({c.msgtype})" for c in chosen if c.msgtype not in FROM_ROS})
+            if bad:
+                raise MessageTypeError(
+                    f"cannot convert {', '.join(bad)}: fusiontrack reads {', '.join(sorted(FROM_ROS))}"
+                )
+        return chosen
+
+    def _raw(
+        self, connections: Sequence[Connection] | None = None, start_ns: int | None = None,
+        stop_ns: int | None = None,
+    ) -> Iterator[tuple[Connection, int, bytes]]:
+        streams = []
+        for reader in self._readers:
+            conns = [c for c in (connections if connections is not None else reader.connections)
+                     if c in reader.connections]
+            if connections is not None and not conns:
+                continue
+            streams.append(self._guarded(reader, reader.messages(connections=conns, start=start_ns, stop=stop_ns)))
+        return heapq.merge(*streams, key=lambda item: item[1])
+
+    @staticmethod
+    def _guarded(reader: AnyReader, it: Iterator[tuple[Connection, int, bytes]]) -> Iterator[Any]:
+        """Turn storage failures in the middle of a file (truncation, corruption) into RecordingError."""
+        try:
+            yield from it
+        except Exception as err:
+            raise RecordingError(
+                f"{', '.join(str(p) for p in reader.paths)}: reading stopped part-way "
+                f"({' '.join(map(str, err.args)) or type(err).__name__}); the file is truncated or corrupt"
+            ) from err
+
+    def raw_messages(
+        self, topics: Iterable[str] | None = None, start_ns: int | None = None, stop_ns: int | None = None,
+    ) -> Iterator[tuple[str, str, int, Any]]:
+        """``(topic, msgtype, log_t_ns, message)`` with messages deserialised but not converted."""
+        conns = self._select(topics, convertible_only=False)
+        owners = {id(c): r for r in self._readers for c in r.connections}
+        for conn, t_ns, raw in self._raw(conns, start_ns, stop_ns):
+            yield conn.topic, conn.msgtype, t_ns, owners[id(conn)].deserialize(raw, conn.msgtype)
+
+    def messages(
+        self,
+        topics: Iterable[str] | None = None,
+        *,
+        start_ns: int | None = None,
+        stop_ns: int | None = None,
+        time_source: TimeSource = "header",
+    ) -> Iterator[Message]:
+        """Converted records in log-time order.
+
+        With ``topics=None`` every topic of a convertible type is read (others are skipped).
+        A message that cannot be deserialised or converted is skipped and counted; one warning with
+        the counts is logged at the end (bad data inside a recording degrades, it does not stop it).
+
+        Raises
+        ------
+        TopicError
+            A requested topic is not in the recording.
+        MessageTypeError
+            A requested topic has a type fusiontrack cannot convert.
+        RecordingError
+            The storage itself fails part-way (truncated or corrupt file).
+        """
+        if time_source not in ("header", "log"):
+            raise ValueError(f"time_source: expected 'header' or 'log', got {time_source!r}")
+        conns = self._select(topics, convertible_only=True)
+        owners = {id(c): r for r in self._readers for c in r.connections}
+        skipped = self.skipped = Counter()
+        reasons: dict[str, str] = {}
+        for conn, log_ns, raw in self._raw(conns, start_ns, stop_ns):
+            try:
+                msg = owners[id(conn)].deserialize(raw, conn.msgtype)
+                t_ns = log_ns
+                if time_source == "header" and conn.msgtype not in HEADERLESS:
+                    t_ns = stamp_to_ns(msg.header.stamp) or log_ns
+                out = FROM_ROS[conn.msgtype](msg, t_ns, self.sensor_of(conn.topic), conn.topic)
+            except Exception as err:  # one bad message must not end the stream
+                skipped[conn.topic] += 1
+                reasons.setdefault(conn.topic, str(err) or type(err).__name__)
+                continue
+            if isinstance(out, list):
+                yield from out
+            else:
+                yield out
+        if skipped:
+            log.warning("skipped %d unreadable message(s): %s", sum(skipped.values()),
+                        "; ".join(f"{t}: {n} (first: {reasons[t]})" for t, n in skipped.items()))
+
+
+def open_recording(paths: str | Path | Sequence[str | Path], **kwargs: Any) -> Recording:
+    """Open one or several recordings as one stream (see :class:`Recording`)."""
+    return Recording(paths, **kwargs)

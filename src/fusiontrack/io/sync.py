@@ -1,0 +1,154 @@
+"""Time alignment: one clock, one order.
+
+* :func:`merge` merges streams that are each in time order (``heapq.merge``).
+* :class:`Synchronizer` puts a stream on a common clock (a per-sensor offset added to ``t_ns``) and
+  back into time order: a message that arrives late by at most ``window_ns`` is put back in its
+  place; one later than that is dropped and counted, and one warning with the counts is logged
+  when the stream ends (never one per message).
+* :func:`estimate_clock_offset` and :func:`align_nearest` are seed 001's client/server clock
+  correction and frame alignment (ALGORITHMS.md B1).
+"""
+
+from __future__ import annotations
+
+import copy
+import heapq
+import itertools
+import logging
+from collections import Counter
+from collections.abc import Iterable, Iterator, Mapping
+from typing import Any, TypeVar
+
+import numpy as np
+
+from ..errors import ConfigError
+
+log = logging.getLogger(__name__)
+
+R = TypeVar("R")
+
+
+def with_time(record: R, t_ns: int) -> R:
+    """A copy of a frozen record with another ``t_ns`` (arrays are shared, not copied: they are read-only)."""
+    out = copy.copy(record)
+    object.__setattr__(out, "t_ns", int(t_ns))
+    return out
+
+
+def merge(*streams: Iterable[R]) -> Iterator[R]:
+    """Merge streams that are each ordered by ``t_ns`` into one ordered stream (stable across inputs)."""
+    return heapq.merge(*streams, key=lambda r: r.t_ns)  # type: ignore[attr-defined]
+
+
+class Synchronizer:
+    """Correct clocks and restore time order in a stream of records.
+
+    Parameters
+    ----------
+    window_ns : int
+        How late (in corrected time, relative to the newest message seen) a message may arrive and
+        still be put back in order. Messages are held back for this long, so it is also the latency
+        the synchroniser adds. Default 200 ms.
+    clock_offsets_ns : mapping sensor -> ns
+        Added to the ``t_ns`` of that sensor's messages (``t_common = t_sensor + offset``).
+
+    Iterate :meth:`__call__` over a stream; :attr:`dropped` and :attr:`reordered` count what happened.
+    """
+
+    def __init__(self, window_ns: int = 200_000_000, clock_offsets_ns: Mapping[str, int] | None = None) -> None:
+        if isinstance(window_ns, bool) or not isinstance(window_ns, int | np.integer) or window_ns < 0:
+            raise ConfigError(f"sync window_ns: expected a non-negative integer of nanoseconds, got {window_ns!r}")
+        offsets = dict(clock_offsets_ns or {})
+        for sensor, value in offsets.items():
+            if isinstance(value, bool) or not isinstance(value, int | np.integer):
+                raise ConfigError(f"clock offset of sensor {sensor!r}: expected integer nanoseconds, got {value!r}")
+        self.window_ns = int(window_ns)
+        self.clock_offsets_ns = {k: int(v) for k, v in offsets.items()}
+        self.dropped: Counter[str] = Counter()
+        self.reordered = 0
+
+    def __call__(self, stream: Iterable[Any]) -> Iterator[Any]:
+        heap: list[tuple[int, int, Any]] = []
+        counter = itertools.count()
+        newest = None  # newest corrected time seen so far
+        last_out = None  # time of the last message let out
+        for record in stream:
+            offset = self.clock_offsets_ns.get(record.sensor, 0)
+            t = record.t_ns + offset
+            if offset:
+                record = with_time(record, t)
+            if last_out is not None and t < last_out:
+                self.dropped[record.sensor] += 1
+                continue
+            if newest is not None and t < newest:
+                self.reordered += 1
+            newest = t if newest is None else max(newest, t)
+            heapq.heappush(heap, (t, next(counter), record))
+            while heap and heap[0][0] <= newest - self.window_ns:
+                last_out, _, out = heapq.heappop(heap)
+                yield out
+        while heap:
+            last_out, _, out = heapq.heappop(heap)
+            yield out
+        if self.dropped:
+            log.warning(
+                "dropped %d message(s) that arrived more than %.0f ms out of order: %s",
+                sum(self.dropped.values()), self.window_ns / 1e6,
+                ", ".join(f"{s}: {n}" for s, n in sorted(self.dropped.items())),
+            )
+
+
+def synchronize(
+    stream: Iterable[Any], window_ns: int = 200_000_000, clock_offsets_ns: Mapping[str, int] | None = None
+) -> Iterator[Any]:
+    """Shorthand for ``Synchronizer(window_ns, clock_offsets_ns)(stream)``."""
+    return Synchronizer(window_ns, clock_offsets_ns)(stream)
+
+
+def estimate_clock_offset(t1: np.ndarray, t2: np.ndarray, t3: np.ndarray, t4: np.ndarray) -> tuple[int, int]:
+    """Client clock offset from request/reply exchanges, keeping the one with the least delay (B1, NTP).
+
+    Parameters
+    ----------
+    t1, t4 : (n,) int
+        Client send and receive times (client clock, ns).
+    t2, t3 : (n,) int
+        Server receive and reply times (server clock, ns).
+
+    Returns
+    -------
+    offset_ns, delay_ns : int
+        ``t_server = t_client + offset_ns``; ``delay_ns`` is the round trip of the exchange used.
+    """
+    t1, t2, t3, t4 = (np.asarray(a, np.int64) for a in (t1, t2, t3, t4))
+    if not (t1.shape == t2.shape == t3.shape == t4.shape) or t1.ndim != 1 or t1.size == 0:
+        raise ValueError("estimate_clock_offset: t1..t4 must be 1-D arrays of one non-zero length")
+    delay = (t4 - t1) - (t3 - t2)
+    best = int(np.argmin(delay))
+    offset = ((t2[best] - t1[best]) + (t3[best] - t4[best])) // 2
+    return int(offset), int(delay[best])
+
+
+def align_nearest(frame_t_ns: np.ndarray, sample_t_ns: np.ndarray, max_dt_ns: int) -> np.ndarray:
+    """For each frame time, the index of the nearest sample within ``max_dt_ns``, else -1 (B1).
+
+    Parameters
+    ----------
+    frame_t_ns : (n_frames,) int
+    sample_t_ns : (n_samples,) int, sorted ascending
+    max_dt_ns : int
+
+    Returns
+    -------
+    (n_frames,) int64 indices into ``sample_t_ns``; -1 where the sensor is missing for that frame.
+    """
+    frames = np.asarray(frame_t_ns, np.int64)
+    samples = np.asarray(sample_t_ns, np.int64)
+    if samples.size == 0:
+        return np.full(frames.shape, -1, np.int64)
+    if np.any(np.diff(samples) < 0):
+        raise ValueError("align_nearest: sample_t_ns must be sorted ascending")
+    right = np.searchsorted(samples, frames).clip(0, samples.size - 1)
+    left = (right - 1).clip(0, samples.size - 1)
+    pick = np.where(np.abs(samples[left] - frames) <= np.abs(samples[right] - frames), left, right)
+    return np.where(np.abs(samples[pick] - frames) <= max_dt_ns, pick, -1).astype(np.int64)

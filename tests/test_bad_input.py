@@ -1,0 +1,201 @@
+"""Bad input gives a FusiontrackError subclass that names what and where; the CLI prints one line."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fusiontrack.config import load_config, parse_config
+from fusiontrack.errors import ConfigError, FusiontrackError, MessageTypeError, RecordingError, TopicError
+from fusiontrack.io.recording import Recording
+from fusiontrack.io.writer import RecordingWriter, write_recording
+from fusiontrack.types import LaserScan
+
+DEMO = "laser/leg_tracker_demo/demo_stationary_simple_environment.bag"
+
+
+def test_missing_file_names_the_path(tmp_path):
+    missing = tmp_path / "nowhere.bag"
+    with pytest.raises(RecordingError, match=r"nowhere\.bag"):
+        Recording(missing)
+
+
+def test_a_file_that_is_not_a_bag(tmp_path):
+    text = tmp_path / "notes.bag"
+    text.write_text("this is not a rosbag\n")
+    with pytest.raises(RecordingError, match=r"notes\.bag"):
+        Recording(text)
+    other = tmp_path / "notes.txt"
+    other.write_text("hello")
+    with pytest.raises(RecordingError, match=r"notes\.txt.*expected a ROS 1 \.bag"):
+        Recording(other)
+
+
+@pytest.mark.parametrize("keep", [0.5, 0.01])
+def test_truncated_ros1_bag(shared_data, tmp_path, keep):
+    src = shared_data / DEMO
+    data = src.read_bytes()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[: int(len(data) * keep)])
+    with pytest.raises(RecordingError, match=r"cut\.bag.*(complete|corrupt|truncated)"), Recording(cut) as rec:
+        list(rec.messages())
+
+
+def test_truncated_mcap(tmp_path):
+    scans = [LaserScan(i * 100_000_000, "laser", "laser", -1.0, 0.01, 0.02, 5.0, np.ones(201) * i)
+             for i in range(1, 200)]
+    write_recording(tmp_path / "rec", scans)
+    (mcap,) = (tmp_path / "rec").glob("*.mcap")
+    data = mcap.read_bytes()
+    mcap.write_bytes(data[: len(data) // 2])
+    with pytest.raises(RecordingError, match=r"rec"), Recording(tmp_path / "rec") as rec:
+        list(rec.messages())
+
+
+def test_unknown_topic_lists_what_is_there(shared_data):
+    with Recording(shared_data / DEMO) as rec, pytest.raises(TopicError, match=r"'/scann'.*it has: /scan"):
+        list(rec.messages(["/scann"]))
+
+
+def test_topic_of_a_type_that_cannot_be_converted(outdoor_bag):
+    with Recording(outdoor_bag) as rec:
+        with pytest.raises(MessageTypeError, match=r"/visualization_marker \(visualization_msgs/msg/Marker\)"):
+            list(rec.messages(["/visualization_marker"]))
+        # ... but it can still be read raw.
+        _topic, msgtype, _, msg = next(iter(rec.raw_messages(["/visualization_marker"])))
+        assert msgtype == "visualization_msgs/msg/Marker"
+        assert hasattr(msg, "pose")
+
+
+def test_unparsable_custom_type_names_the_type(shared_data):
+    with pytest.raises(MessageTypeError, match="my_pkg/msg/Broken"):
+        Recording(shared_data / DEMO, custom_types={"my_pkg/msg/Broken": "this is not :: a definition"})
+
+
+def test_custom_type_registered_from_a_definition_string(tmp_path):
+    """A type unknown to any store is written and read back through a definition string."""
+    definition = "std_msgs/Header header\nfloat64 x_m\nfloat64 y_m\nuint32 id\nstring label\n"
+    with RecordingWriter(tmp_path / "c", custom_types={"my_pkg/msg/Marker2D": definition}) as w:
+        t = w.typestore.types
+        hdr = t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=1, nanosec=5), frame_id="w")
+        msg = t["my_pkg/msg/Marker2D"](header=hdr, x_m=1.5, y_m=-2.0, id=7, label="door")
+        conn = w._writer.add_connection("/marks", "my_pkg/msg/Marker2D", typestore=w.typestore)
+        w._writer.write(conn, 1_000_000_005, w.typestore.serialize_cdr(msg, "my_pkg/msg/Marker2D"))
+    with Recording(tmp_path / "c", custom_types={"my_pkg/msg/Marker2D": definition}) as rec:
+        ((topic, msgtype, t_ns, back),) = list(rec.raw_messages())
+    assert (topic, msgtype, t_ns) == ("/marks", "my_pkg/msg/Marker2D", 1_000_000_005)
+    assert (back.x_m, back.y_m, back.id, back.label) == (1.5, -2.0, 7, "door")
+
+
+def test_config_value_of_the_wrong_type(tmp_path):
+    cfg = tmp_path / "pipeline.toml"
+    cfg.write_text('[sensors.laser_front]\nkind = "laser"\ntopic = "/scan"\npose = { x = "two metres" }\n')
+    with pytest.raises(ConfigError, match=r"pipeline\.toml.*sensors\.laser_front\.pose\.x.*'two metres'"):
+        load_config(cfg)
+
+
+def test_config_errors_name_the_field():
+    with pytest.raises(ConfigError, match=r"sensors\.cam\.kind.*'camra'"):
+        parse_config({"sensors": {"cam": {"kind": "camra", "topic": "/image"}}})
+    with pytest.raises(ConfigError, match=r"sync\.window_ms"):
+        parse_config({"sync": {"window_ms": -5}})
+    with pytest.raises(ConfigError, match=r"sensors\.l\.topc"):  # a typo is not silently ignored
+        parse_config({"sensors": {"l": {"kind": "laser", "topc": "/scan"}}})
+
+
+def test_config_file_problems(tmp_path):
+    with pytest.raises(ConfigError, match="not found"):
+        load_config(tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[sensors\nkind = ")
+    with pytest.raises(ConfigError, match=r"bad\.toml: not valid TOML"):
+        load_config(bad)
+
+
+def test_a_good_config_is_typed():
+    cfg = parse_config({"sync": {"window_ms": 50}, "sensors": {
+        "laser_front": {"kind": "laser", "topic": "/scan", "clock_offset_ms": -12.5,
+                        "pose": {"x": 1.0, "yaw_deg": 90.0}}}})
+    assert cfg.sync.window_ns == 50_000_000
+    assert cfg.topics() == {"/scan": "laser_front"}
+    assert cfg.clock_offsets_ns() == {"laser_front": -12_500_000}
+    T = cfg.sensors["laser_front"].pose.matrix()
+    np.testing.assert_allclose(T[:3, :3] @ [1, 0, 0] + T[:3, 3], [1.0, 1.0, 0.0], atol=1e-12)
+
+
+def test_every_error_is_a_fusiontrack_error():
+    for cls in (RecordingError, TopicError, MessageTypeError, ConfigError):
+        assert issubclass(cls, FusiontrackError)
+
+
+def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "fusiontrack", *args], capture_output=True, text=True,
+                          cwd=cwd, timeout=120)
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        (["info", "nowhere.bag"], "nowhere.bag"),
+        (["convert", "{demo}", "-o", "{out}", "-t", "/scann"], "/scann"),
+        (["convert", "{demo}", "-o", "{out}", "--config", "{cfg}"], "window_ms"),
+        (["info", "{junk}"], "junk.bag"),
+    ],
+)
+def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args, expected):
+    cfg = tmp_path / "p.toml"
+    cfg.write_text("[sync]\nwindow_ms = 'soon'\n")
+    junk = tmp_path / "junk.bag"
+    junk.write_bytes(b"\x00" * 100)
+    subst = {"demo": str(shared_data / DEMO), "out": str(tmp_path / "o"), "cfg": str(cfg), "junk": str(junk)}
+    result = _cli(*[a.format(**subst) for a in args])
+    assert result.returncode == 2
+    lines = [ln for ln in result.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("error:")
+    assert expected in lines[0]
+    assert "Traceback" not in result.stderr
+
+
+def test_nan_ranges_and_disordered_messages_do_not_stop_reading(tmp_path):
+    """Bad data inside a recording is carried through (NaN ranges) or skipped and counted."""
+    rng = np.random.default_rng(5)
+    scans = []
+    for i in range(50):
+        r = rng.random(100).astype(np.float32) * 4
+        r[rng.random(100) < 0.3] = np.nan
+        scans.append(LaserScan((i + 1) * 100_000_000, "laser", "laser", -1.0, 0.02, 0.02, 5.0, r))
+    order = rng.permutation(50)
+    with RecordingWriter(tmp_path / "r") as w:
+        for k, i in enumerate(order):  # log order scrambled relative to the header stamps
+            w.write(scans[i], log_t_ns=k * 100_000_000)
+    from fusiontrack.io.sync import Synchronizer
+
+    sync = Synchronizer(window_ns=10**12)  # a window longer than the recording restores everything
+    with Recording(tmp_path / "r") as rec:
+        out = list(sync(rec.messages()))
+    assert [s.t_ns for s in out] == [s.t_ns for s in scans]
+    assert np.isnan(out[3].valid_ranges_m()).sum() == np.isnan(scans[3].ranges_m).sum()
+
+
+def test_cli_version():
+    result = _cli("--version")
+    assert result.returncode == 0
+    assert result.stdout.startswith("fusiontrack ")
+
+
+def test_cli_help_on_every_command():
+    result = _cli("--help")
+    assert result.returncode == 0
+    commands = [c for c in ("info", "convert", "birdseye", "demo") if c in result.stdout]
+    assert commands == ["info", "convert", "birdseye", "demo"]
+    for cmd in commands:
+        sub = _cli(cmd, "--help")
+        assert sub.returncode == 0
+        assert "Usage" in sub.stdout
+
+
