@@ -65,11 +65,10 @@ class Situation(enum.StrEnum):
 def _frozen_array(value: Any, dtype: Any, shape: tuple[int | None, ...] | None, name: str) -> np.ndarray:
     """Convert to a read-only array of ``dtype``; check the shape (``None`` = any length on that axis)."""
     arr = np.array(value, dtype=dtype, copy=True)
-    if shape is not None:
-        ok = arr.ndim == len(shape) and all(s is None or s == n for s, n in zip(shape, arr.shape, strict=True))
-        if not ok:
-            want = "(" + ", ".join("n" if s is None else str(s) for s in shape) + ")"
-            raise ValueError(f"{name}: expected an array of shape {want}, got {arr.shape}")
+    if shape is not None and (arr.ndim != len(shape) or (shape != (None,) and any(
+            s is not None and s != n for s, n in zip(shape, arr.shape, strict=True)))):
+        want = "(" + ", ".join("n" if s is None else str(s) for s in shape) + ")"
+        raise ValueError(f"{name}: expected an array of shape {want}, got {arr.shape}")
     arr.setflags(write=False)
     return arr
 
@@ -126,20 +125,24 @@ class LaserScan:
     scan_time_s: float = 0.0
     angle_max_rad: float | None = None
 
+    _FLOAT32_FIELDS = ("angle_min_rad", "angle_increment_rad", "range_min_m", "range_max_m",
+                       "time_increment_s", "scan_time_s", "angle_max_rad")
+
     def __post_init__(self) -> None:
         _set(self, "t_ns", _check_time(self.t_ns))
+        ranges = _frozen_array(self.ranges_m, np.float32, (None,), "LaserScan.ranges_m")
+        intensities = _frozen_array(self.intensities, np.float32, (None,), "LaserScan.intensities")
+        if intensities.size not in (0, ranges.size):
+            raise ValueError(f"LaserScan.intensities: expected 0 or {ranges.size} values, got {intensities.size}")
+        _set(self, "ranges_m", ranges)
+        _set(self, "intensities", intensities)
         if self.angle_max_rad is None:  # ROS: angle of the last beam
-            _set(self, "angle_max_rad", self.angle_min_rad + (np.size(self.ranges_m) - 1) * self.angle_increment_rad)
-        _set(self, "ranges_m", _frozen_array(self.ranges_m, np.float32, (None,), "LaserScan.ranges_m"))
-        _set(self, "intensities", _frozen_array(self.intensities, np.float32, (None,), "LaserScan.intensities"))
-        if self.intensities.size not in (0, self.ranges_m.size):
-            raise ValueError(
-                f"LaserScan.intensities: expected 0 or {self.ranges_m.size} values, got {self.intensities.size}"
-            )
-        # sensor_msgs/LaserScan stores these as float32: hold exactly what a recording can hold.
-        for name in ("angle_min_rad", "angle_increment_rad", "range_min_m", "range_max_m",
-                     "time_increment_s", "scan_time_s", "angle_max_rad"):
-            _set(self, name, float(np.float32(getattr(self, name))))
+            _set(self, "angle_max_rad", self.angle_min_rad + (ranges.size - 1) * self.angle_increment_rad)
+        # sensor_msgs/LaserScan stores these as float32: hold exactly what a recording can hold
+        # (one array conversion for all seven: this runs once per scan on the read path).
+        values = np.array([getattr(self, name) for name in self._FLOAT32_FIELDS], np.float32).tolist()
+        for name, value in zip(self._FLOAT32_FIELDS, values, strict=True):
+            _set(self, name, value)
 
     @property
     def n_beams(self) -> int:

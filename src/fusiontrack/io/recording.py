@@ -27,7 +27,16 @@ from rosbags.interfaces import Connection
 
 from ..errors import MessageTypeError, RecordingError, TopicError
 from ..types import Message
-from .ros import FROM_ROS, HEADERLESS, build_typestore, parse_definitions, stamp_to_ns
+from .ros import (
+    FROM_ROS,
+    HEADERLESS,
+    build_typestore,
+    laserscan_from_cdr_bytes,
+    laserscan_from_ros1_bytes,
+    parse_definitions,
+    stamp_to_ns,
+)
+from .sync import with_time
 
 log = logging.getLogger(__name__)
 
@@ -35,6 +44,7 @@ SENSOR_MAP_KEY = "fusiontrack.sensors"
 """Key of the topic -> sensor map that fusiontrack's writer stores in a rosbag2 recording."""
 
 TimeSource = Literal["header", "log"]
+LASERSCAN = "sensor_msgs/msg/LaserScan"
 
 
 @dataclass(frozen=True, slots=True)
@@ -262,6 +272,8 @@ class Recording:
             if connections is not None and not conns:
                 continue
             streams.append(self._guarded(reader, reader.messages(connections=conns, start=start_ns, stop=stop_ns)))
+        if len(streams) == 1:
+            return streams[0]
         return heapq.merge(*streams, key=lambda item: item[1])
 
     @staticmethod
@@ -314,12 +326,19 @@ class Recording:
         skipped = self.skipped = Counter()
         reasons: dict[str, str] = {}
         for conn, log_ns, raw in self._raw(conns, start_ns, stop_ns):
+            reader = owners[id(conn)]
+            sensor = self.sensor_of(conn.topic)
             try:
-                msg = owners[id(conn)].deserialize(raw, conn.msgtype)
+                if conn.msgtype == LASERSCAN:
+                    fast = (laserscan_from_cdr_bytes if reader.is2 else laserscan_from_ros1_bytes)(raw, sensor)
+                    if fast is not None:
+                        yield fast if time_source == "header" and fast.t_ns else with_time(fast, log_ns)
+                        continue
+                msg = reader.deserialize(raw, conn.msgtype)
                 t_ns = log_ns
                 if time_source == "header" and conn.msgtype not in HEADERLESS:
                     t_ns = stamp_to_ns(msg.header.stamp) or log_ns
-                out = FROM_ROS[conn.msgtype](msg, t_ns, self.sensor_of(conn.topic), conn.topic)
+                out = FROM_ROS[conn.msgtype](msg, t_ns, sensor, conn.topic)
             except Exception as err:  # one bad message must not end the stream
                 skipped[conn.topic] += 1
                 reasons.setdefault(conn.topic, str(err) or type(err).__name__)
