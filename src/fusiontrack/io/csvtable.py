@@ -1,0 +1,137 @@
+"""Numeric CSV tables with errors that name the file, line and column (shared by the CSV readers)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import RecordingError
+
+
+@dataclass(frozen=True, slots=True)
+class NumericTable:
+    """A parsed numeric CSV file.
+
+    Attributes
+    ----------
+    values : (n_rows, n_cols) float64
+        Every column as float.
+    ints : dict of column index -> (n_rows,) int64
+        The columns asked for as exact integers (e.g. nanosecond stamps beyond 2**53).
+    line_numbers : (n_rows,) int64
+        The 1-based line of the file each row came from (for later error messages).
+    header : list of str or None
+        The header fields (stripped) when ``header=True``.
+    """
+
+    values: np.ndarray
+    ints: dict[int, np.ndarray]
+    line_numbers: np.ndarray
+    header: list[str] | None
+
+    def __len__(self) -> int:
+        return int(self.values.shape[0])
+
+
+def _read_text(path: Path, what: str) -> str:
+    try:
+        return path.read_text(encoding="utf-8")
+    except FileNotFoundError as err:
+        raise RecordingError(f"{path}: no such file (expected {what})") from err
+    except IsADirectoryError as err:
+        raise RecordingError(f"{path}: is a folder (expected {what})") from err
+    except UnicodeDecodeError as err:
+        raise RecordingError(f"{path}: not a UTF-8 text file (expected {what})") from err
+    except OSError as err:
+        raise RecordingError(f"{path}: cannot be read ({err.strerror or err}; expected {what})") from err
+
+
+def _locate_bad_line(
+    path: Path, rows: Sequence[tuple[int, str]], n_cols: int | None, int_cols: Sequence[int], what: str
+) -> RecordingError | None:
+    """Scan row by row for the first one that is not ``n_cols`` numbers; the error or ``None``."""
+    expected = n_cols if n_cols is not None else len(rows[0][1].split(","))
+    for lineno, line in rows:
+        fields = line.split(",")
+        if len(fields) != expected:
+            return RecordingError(
+                f"{path}, line {lineno}: expected {expected} comma-separated values ({what}), "
+                f"got {len(fields)}: {line.strip()[:80]!r}"
+            )
+        for col, text in enumerate(fields):
+            try:
+                int(text) if col in int_cols else float(text)
+            except ValueError:
+                kind = "an integer" if col in int_cols else "a number"
+                return RecordingError(f"{path}, line {lineno}, column {col + 1}: expected {kind} ({what}), "
+                                      f"got {text.strip()[:40]!r}")
+    return None
+
+
+def read_numeric_table(
+    path: str | Path,
+    *,
+    n_cols: int | None = None,
+    int_cols: Sequence[int] = (),
+    header: bool = False,
+    comment: str = "#",
+    what: str = "a numeric CSV file",
+) -> NumericTable:
+    """Read a comma-separated file of numbers, with errors that name the file and line.
+
+    Parameters
+    ----------
+    path : str or Path
+    n_cols : int, optional
+        Required number of columns; by default every row must have as many as the first.
+    int_cols : sequence of int
+        0-based columns to parse also as exact ``int64`` (they must hold integers).
+    header : bool
+        The first non-blank, non-comment line is a header of names, returned in ``header``.
+    comment : str
+        Lines starting with this (after leading blanks) are skipped, as are blank lines.
+    what : str
+        What the file should be, for error messages (e.g. ``"t_ns, ax, ay, az"``).
+
+    Returns
+    -------
+    NumericTable
+
+    Raises
+    ------
+    RecordingError
+        Missing or unreadable file, no data rows, wrong column count or a value that is not a number.
+    """
+    path = Path(path)
+    text = _read_text(path, what)
+    rows = [(i, line) for i, line in enumerate(text.splitlines(), start=1)
+            if line.strip() and not line.lstrip().startswith(comment)]
+    names: list[str] | None = None
+    if header:
+        if not rows:
+            raise RecordingError(f"{path}: empty file (expected a header line and rows of {what})")
+        names = [name.strip() for name in rows[0][1].split(",")]
+        rows = rows[1:]
+        if n_cols is None:
+            n_cols = len(names)
+    if not rows:
+        raise RecordingError(f"{path}: no data rows (expected {what})")
+    lines = [line for _, line in rows]
+    try:
+        values = np.loadtxt(lines, delimiter=",", dtype=np.float64, ndmin=2, comments=None)
+        if n_cols is not None and values.shape[1] != n_cols:
+            raise ValueError(f"{values.shape[1]} columns instead of {n_cols}")
+        ints = {c: np.loadtxt(lines, delimiter=",", dtype=np.int64, usecols=c, ndmin=1, comments=None)
+                for c in int_cols}
+    except ValueError as err:
+        located = _locate_bad_line(path, rows, n_cols, int_cols, what)
+        if located is None:
+            located = RecordingError(f"{path}: cannot be parsed as {what}: {err}")
+        raise located from err
+    line_numbers = np.array([i for i, _ in rows], dtype=np.int64)
+    return NumericTable(values=values, ints=ints, line_numbers=line_numbers, header=names)
+
+

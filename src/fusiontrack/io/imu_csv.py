@@ -1,0 +1,333 @@
+"""Reading phone accelerometer / IMU samples from CSV files.
+
+Three formats are understood (``format=`` names them; ``"auto"`` detects them):
+
+``"oxford_validation"``
+    Oxford Step Counter ``validation/*.csv``: no header, seven columns
+    ``timestamp_ns_since_boot, acc_x, acc_y, acc_z, steps_by_app, steps_by_ground_truth, steps_by_hw``
+    (acceleration in m/s^2; the three step columns are cumulative counts).
+``"oxford_optimisation"``
+    Oxford Step Counter ``optimisation/<trace>/``: ``accelerometer.csv`` with no header,
+    ``ts_ns, sensor_type, ax, ay, az``, and (optional, next to it) ``stepcounter.csv``,
+    ``ts_ns, gt_step_event, hw_step_event``. The two step columns are *toggling* 0/1 levels, not
+    impulses: each change of value is one step (the number of changes of ``gt_step_event`` equals the
+    ``steps`` column of ``optimisation/stats.csv``; the number of 1s does not). The rows come every
+    ~90 ms and the intervals between changes alternate short and long (~0.27 s / ~0.81 s on the
+    Pixel traces, ~1.08 s per stride), so the times suit step counts and cadence over a few seconds
+    better than the instant of each foot strike. The path may name the trace folder or its
+    ``accelerometer.csv``. (The Pixel accelerometer runs at ~405 Hz, not ~100 Hz.)
+``"generic"``
+    A CSV for users' own phones, with a header row naming the columns (any order, extra columns
+    ignored, ``#`` comment lines and blank lines skipped)::
+
+        t_ns,ax,ay,az[,gx,gy,gz]        # t_ns: integer nanoseconds
+        t_s,ax,ay,az[,gx,gy,gz]         # t_s: seconds (float), rounded to the nearest ns
+
+    ``ax, ay, az`` in m/s^2 (specific force, gravity included, as phones report it); ``gx, gy, gz``
+    in rad/s. Without gyro columns the gyro is ``NaN``.
+
+Auto-detection: a folder, or a file named ``accelerometer.csv``, is ``oxford_optimisation``; otherwise
+the first data line decides: a header with letters is ``generic``, seven numbers are
+``oxford_validation``, five numbers are ``oxford_optimisation`` (an accelerometer file alone).
+
+Rows must be in non-decreasing time order (repeated stamps occur in the Oxford data and are kept). A
+row with the wrong number of columns or a value that is not a number raises
+:class:`~fusiontrack.errors.RecordingError` naming the file and the line (1-based, as an editor shows it).
+No pandas: parsing is ``np.loadtxt`` with a line-by-line scan only to locate an error.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConfigError, RecordingError
+from ..types import ImuSample
+from .csvtable import NumericTable, read_numeric_table
+
+__all__ = [
+    "IMU_CSV_FORMATS",
+    "ImuCsv",
+    "detect_imu_csv_format",
+    "read_imu_csv",
+]
+
+logger = logging.getLogger(__name__)
+
+IMU_CSV_FORMATS = ("oxford_validation", "oxford_optimisation", "generic")
+"""The values ``format=`` accepts besides ``"auto"``."""
+
+
+def _check_time_order(path: Path, t_ns: np.ndarray, line_numbers: np.ndarray) -> None:
+    back = np.flatnonzero(np.diff(t_ns) < 0)
+    if back.size:
+        i = int(back[0]) + 1
+        raise RecordingError(
+            f"{path}, line {int(line_numbers[i])}: time goes backwards ({int(t_ns[i])} ns after "
+            f"{int(t_ns[i - 1])} ns); expected rows in non-decreasing time order"
+        )
+    n_repeat = int(np.count_nonzero(np.diff(t_ns) == 0))
+    if n_repeat:
+        logger.debug("%s: %d samples repeat the previous time stamp", path, n_repeat)
+
+
+# --------------------------------------------------------------------------------------------------
+# The result
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class ImuCsv:
+    """IMU samples read from a CSV file, as arrays and (built on first use) as records.
+
+    Attributes
+    ----------
+    path : Path
+        The file read (the ``accelerometer.csv`` for the optimisation format).
+    format : str
+        One of :data:`IMU_CSV_FORMATS`.
+    sensor, frame_id : str
+        Given to every :class:`~fusiontrack.types.ImuSample`.
+    t_ns : (n,) int64
+        Sample times in nanoseconds (the file's clock, e.g. time since boot), non-decreasing.
+    accel_mps2 : (n, 3) float64
+        Specific force in m/s^2 in the phone's frame.
+    gyro_radps : (n, 3) float64
+        Angular rate in rad/s; ``NaN`` when the file has none.
+    steps_gt_cum, steps_app_cum, steps_hw_cum : (n,) int64 or None
+        Cumulative step counts at each sample (ground truth, the Oxford app's algorithm, the phone's
+        hardware counter); ``oxford_validation`` only.
+    step_times_ns : (k,) int64 or None
+        Ground-truth step times: where ``steps_gt_cum`` increases (validation, so at the resolution of
+        the 10 ms sampling), or where ``gt_step_event`` toggles (optimisation). ``None`` when the
+        file holds no ground truth.
+    hw_step_times_ns : (k,) int64 or None
+        The same for the phone's hardware step counter (optimisation format only).
+    """
+
+    path: Path
+    format: str
+    sensor: str
+    frame_id: str
+    t_ns: np.ndarray
+    accel_mps2: np.ndarray
+    gyro_radps: np.ndarray
+    steps_gt_cum: np.ndarray | None = None
+    steps_app_cum: np.ndarray | None = None
+    steps_hw_cum: np.ndarray | None = None
+    step_times_ns: np.ndarray | None = None
+    hw_step_times_ns: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("t_ns", "accel_mps2", "gyro_radps", "steps_gt_cum", "steps_app_cum", "steps_hw_cum",
+                     "step_times_ns", "hw_step_times_ns"):
+            arr = getattr(self, name)
+            if arr is not None:
+                arr.setflags(write=False)
+
+    def __len__(self) -> int:
+        return int(self.t_ns.size)
+
+    @functools.cached_property
+    def samples(self) -> list[ImuSample]:
+        """The samples as records, ``len(self)`` of them (built once, on first access)."""
+        return [ImuSample(t, self.sensor, self.frame_id, a, g)
+                for t, a, g in zip(self.t_ns.tolist(), self.accel_mps2, self.gyro_radps, strict=True)]
+
+    @property
+    def duration_s(self) -> float:
+        """Time from the first to the last sample, in seconds."""
+        return float(self.t_ns[-1] - self.t_ns[0]) * 1e-9 if len(self) else 0.0
+
+    @property
+    def rate_hz(self) -> float:
+        """Sampling rate from the median sampling interval (robust to gaps and repeated stamps), in Hz."""
+        dt = np.diff(self.t_ns)
+        dt = dt[dt > 0]
+        return float(1e9 / np.median(dt)) if dt.size else float("nan")
+
+    @property
+    def n_steps_gt(self) -> int | None:
+        """The ground-truth number of steps in the file, or ``None`` when it holds no ground truth."""
+        if self.steps_gt_cum is not None:
+            return int(self.steps_gt_cum[-1])
+        return None if self.step_times_ns is None else int(self.step_times_ns.size)
+
+
+# --------------------------------------------------------------------------------------------------
+# Format readers
+# --------------------------------------------------------------------------------------------------
+
+_VALIDATION_COLS = ("timestamp_ns_since_boot, acc_x, acc_y, acc_z, steps_by_app, "
+                    "steps_by_ground_truth, steps_by_hw")
+_ACCEL_COLS = "ts_ns, sensor_type, ax, ay, az"
+_STEP_COLS = "ts_ns, gt_step_event, hw_step_event"
+
+
+def _increase_times(t_ns: np.ndarray, cum: np.ndarray) -> np.ndarray:
+    """Times at which a cumulative count increases, each repeated by the size of the increase."""
+    inc = np.diff(cum, prepend=cum[:1])
+    return np.repeat(t_ns, np.clip(inc, 0, None))
+
+
+def _toggle_times(t_ns: np.ndarray, level: np.ndarray) -> np.ndarray:
+    """Times at which a 0/1 level changes value (one event per change)."""
+    return t_ns[1:][level[1:] != level[:-1]]
+
+
+def _int_column(path: Path, table: NumericTable, col: int, name: str) -> np.ndarray:
+    x = table.values[:, col]
+    bad = np.flatnonzero(x != np.round(x))
+    if bad.size:
+        i = int(bad[0])
+        raise RecordingError(f"{path}, line {int(table.line_numbers[i])}: {name} must be a whole number, "
+                             f"got {x[i]!r}")
+    return x.astype(np.int64)
+
+
+def _read_validation(path: Path, sensor: str, frame_id: str) -> ImuCsv:
+    table = read_numeric_table(path, n_cols=7, int_cols=(0,), what=_VALIDATION_COLS)
+    t_ns = table.ints[0]
+    _check_time_order(path, t_ns, table.line_numbers)
+    app, gt, hw = (_int_column(path, table, c, name) for c, name in
+                   ((4, "steps_by_app"), (5, "steps_by_ground_truth"), (6, "steps_by_hw")))
+    return ImuCsv(path, "oxford_validation", sensor, frame_id, t_ns, table.values[:, 1:4].copy(),
+                  np.full((t_ns.size, 3), np.nan), steps_gt_cum=gt, steps_app_cum=app, steps_hw_cum=hw,
+                  step_times_ns=_increase_times(t_ns, gt))
+
+
+def _read_optimisation(path: Path, sensor: str, frame_id: str) -> ImuCsv:
+    folder = path if path.is_dir() else path.parent
+    accel_path = folder / "accelerometer.csv" if path.is_dir() else path
+    table = read_numeric_table(accel_path, n_cols=5, int_cols=(0,), what=_ACCEL_COLS)
+    t_ns = table.ints[0]
+    _check_time_order(accel_path, t_ns, table.line_numbers)
+    kinds = np.unique(table.values[:, 1])
+    if kinds.size > 1:
+        logger.warning("%s: several sensor_type values %s; all rows are read as accelerometer",
+                       accel_path, kinds.tolist())
+    step_path = folder / "stepcounter.csv"
+    gt_times = hw_times = None
+    if step_path.is_file():
+        steps = read_numeric_table(step_path, n_cols=3, int_cols=(0,), what=_STEP_COLS)
+        ts = steps.ints[0]
+        _check_time_order(step_path, ts, steps.line_numbers)
+        gt_times = _toggle_times(ts, _int_column(step_path, steps, 1, "gt_step_event"))
+        hw_times = _toggle_times(ts, _int_column(step_path, steps, 2, "hw_step_event"))
+    else:
+        logger.info("%s: no stepcounter.csv next to it; no ground-truth steps", accel_path)
+    return ImuCsv(accel_path, "oxford_optimisation", sensor, frame_id, t_ns, table.values[:, 2:5].copy(),
+                  np.full((t_ns.size, 3), np.nan), step_times_ns=gt_times, hw_step_times_ns=hw_times)
+
+
+_GENERIC_DOC = "a header with t_ns or t_s, ax, ay, az and optionally gx, gy, gz"
+
+
+def _read_generic(path: Path, sensor: str, frame_id: str) -> ImuCsv:
+    table = read_numeric_table(path, header=True, what=_GENERIC_DOC)
+    names = [n.lower() for n in table.header or []]
+    missing = [n for n in ("ax", "ay", "az") if n not in names]
+    if ("t_ns" not in names and "t_s" not in names) or missing:
+        raise RecordingError(f"{path}, line {int(table.line_numbers[0]) - 1}: header {table.header} "
+                             f"lacks {missing or ['t_ns or t_s']} (expected {_GENERIC_DOC})")
+    if "t_ns" in names:
+        t_ns = _int_column(path, table, names.index("t_ns"), "t_ns")
+        col = names.index("t_ns")
+        if np.abs(table.values[:, col]).max() >= 2.0**53:  # beyond float64's exact integers
+            exact = read_numeric_table(path, header=True, int_cols=(col,), what=_GENERIC_DOC)
+            t_ns = exact.ints[col]
+    else:
+        t_ns = np.rint(table.values[:, names.index("t_s")] * 1e9).astype(np.int64)
+    _check_time_order(path, t_ns, table.line_numbers)
+    accel = table.values[:, [names.index(n) for n in ("ax", "ay", "az")]]
+    gyro_names = ("gx", "gy", "gz")
+    if all(n in names for n in gyro_names):
+        gyro = table.values[:, [names.index(n) for n in gyro_names]]
+    else:
+        if any(n in names for n in gyro_names):
+            raise RecordingError(f"{path}: header {table.header} has only some of gx, gy, gz "
+                                 "(expected all three or none)")
+        gyro = np.full((t_ns.size, 3), np.nan)
+    return ImuCsv(path, "generic", sensor, frame_id, t_ns, accel, gyro)
+
+
+_READERS = {"oxford_validation": _read_validation, "oxford_optimisation": _read_optimisation,
+            "generic": _read_generic}
+
+
+def detect_imu_csv_format(path: str | Path) -> str:
+    """Guess the format of an IMU CSV file or Oxford trace folder (see the module docstring).
+
+    Raises
+    ------
+    RecordingError
+        The path does not exist or matches no known format.
+    """
+    path = Path(path)
+    if path.is_dir():
+        if (path / "accelerometer.csv").is_file():
+            return "oxford_optimisation"
+        raise RecordingError(f"{path}: a folder without accelerometer.csv (expected an Oxford optimisation "
+                             "trace folder or a CSV file)")
+    if path.name == "accelerometer.csv":
+        return "oxford_optimisation"
+    try:
+        with path.open(encoding="utf-8") as f:
+            first = next((line for line in f if line.strip() and not line.lstrip().startswith("#")), "")
+    except (OSError, UnicodeDecodeError) as err:
+        raise RecordingError(f"{path}: cannot be read (expected an IMU CSV file)") from err
+    fields = [x.strip() for x in first.split(",")]
+    if any(c.isalpha() and x.lower() not in ("nan", "inf", "-inf") for x in fields for c in x[:1]):
+        return "generic"
+    if len(fields) == 7:
+        return "oxford_validation"
+    if len(fields) == 5:
+        return "oxford_optimisation"
+    raise RecordingError(
+        f"{path}, first line: {len(fields)} columns without a header; expected 7 ({_VALIDATION_COLS}), "
+        f"5 ({_ACCEL_COLS}) or {_GENERIC_DOC}"
+    )
+
+
+def read_imu_csv(
+    path: str | Path, *, format: str = "auto", sensor: str = "imu", frame_id: str | None = None
+) -> ImuCsv:
+    """Read accelerometer (and gyro) samples from a CSV file or an Oxford trace folder.
+
+    Parameters
+    ----------
+    path : str or Path
+        A CSV file, or an Oxford optimisation trace folder.
+    format : {"auto", "oxford_validation", "oxford_optimisation", "generic"}
+        See the module docstring; ``"auto"`` calls :func:`detect_imu_csv_format`.
+    sensor : str
+        The ``sensor`` of every sample.
+    frame_id : str, optional
+        The ``frame_id`` of every sample; defaults to ``sensor``.
+
+    Returns
+    -------
+    ImuCsv
+        Arrays ``t_ns (n,)``, ``accel_mps2 (n, 3)``, ``gyro_radps (n, 3)``, ground-truth steps when the
+        format has them, and ``samples`` as :class:`~fusiontrack.types.ImuSample` records.
+
+    Raises
+    ------
+    RecordingError
+        Missing file, unknown format, a bad row (file and line named) or time going backwards.
+    ConfigError
+        ``format`` is not one of the known names.
+    """
+    path = Path(path)
+    if format != "auto" and format not in _READERS:
+        raise ConfigError(f"format: expected 'auto' or one of {list(IMU_CSV_FORMATS)}, got {format!r}")
+    if not path.exists():
+        raise RecordingError(f"{path}: no such file or folder (expected an IMU CSV file)")
+    fmt = detect_imu_csv_format(path) if format == "auto" else format
+    result = _READERS[fmt](path, sensor, sensor if frame_id is None else frame_id)
+    logger.debug("%s: %d IMU samples (%s) over %.1f s", path, len(result), fmt, result.duration_s)
+    return result

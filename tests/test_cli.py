@@ -1,0 +1,98 @@
+"""The CLI as a user runs it: info, convert, birdseye and demo on real recordings."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+
+from fusiontrack.io.recording import Recording
+from fusiontrack.types import LaserScan, records_equal
+
+DEMO = "laser/leg_tracker_demo/demo_stationary_simple_environment.bag"
+
+
+def run(*args: str, cwd=None) -> subprocess.CompletedProcess:
+    result = subprocess.run([sys.executable, "-m", "fusiontrack", *args], capture_output=True, text=True,
+                            cwd=cwd, timeout=300)
+    assert result.returncode == 0, result.stderr
+    return result
+
+
+def test_info_json_states_the_readme_facts(shared_data):
+    out = json.loads(run("info", str(shared_data / "laser/leg_tracker_demo/training/negative_2.bag"), "--json").stdout)
+    counts = {t["topic"]: t["count"] for t in out["topics"]}
+    assert counts == {"/left_scan": 435, "/rear_scan": 435, "/right_scan": 434}
+    assert abs(out["duration_s"] - 57.8) < 0.1
+    assert all(abs(t["rate_hz"] - 7.5) < 0.1 for t in out["topics"])
+
+
+def test_info_on_video_and_imu_csv(shared_data):
+    video = shared_data / "video/pets09_s2l1/vtest_pets09_s2l1_480x360.avi"
+    imu = shared_data / "imu/oxford_step_counter/validation/user1_hand_1506421989895.csv"
+    out = json.loads(run("info", str(video), str(imu), "--json").stdout)
+    by_kind = {d["kind"]: d for d in out}
+    assert (by_kind["video"]["frames"], by_kind["video"]["width"], by_kind["video"]["height"]) == (795, 480, 360)
+    assert by_kind["imu_csv"]["ground_truth_steps"] == 326
+    assert abs(by_kind["imu_csv"]["rate_hz"] - 100) < 2
+
+
+def test_convert_to_mcap_keeps_every_scan(shared_data, tmp_path):
+    bag = shared_data / DEMO
+    run("convert", str(bag), "-o", str(tmp_path / "mcap"))
+    assert list((tmp_path / "mcap").glob("*.mcap"))
+    with Recording(bag) as a, Recording(tmp_path / "mcap") as b:
+        original = list(a.messages())
+        converted = list(b.messages())
+    assert len(converted) == len(original) == 1265
+    assert all(records_equal(x, y) for x, y in zip(original, converted, strict=True))
+
+
+def test_convert_applies_config_sensor_names_and_clock_offsets(shared_data, tmp_path):
+    cfg = tmp_path / "p.toml"
+    cfg.write_text('[sensors.front]\nkind = "laser"\ntopic = "/scan"\nclock_offset_ms = 250\n')
+    run("convert", str(shared_data / DEMO), "-o", str(tmp_path / "out"), "--config", str(cfg))
+    with Recording(shared_data / DEMO) as a, Recording(tmp_path / "out") as b:
+        first_in = next(iter(a.messages()))
+        scans = list(b.messages())
+    assert {s.sensor for s in scans} == {"front"}
+    assert scans[0].t_ns == first_in.t_ns + 250_000_000
+    assert np.array_equal(scans[0].ranges_m, first_in.ranges_m, equal_nan=True)
+
+
+def test_birdseye_draws_the_scans_where_the_laser_saw_them(shared_data, tmp_path):
+    video = tmp_path / "scans.mp4"
+    run("birdseye", str(shared_data / DEMO), "-o", str(video), "--max-frames", "30")
+    cap = cv2.VideoCapture(str(video))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 30
+    ok, frame = cap.read()
+    cap.release()
+    assert ok
+    # The scan's returns are drawn in yellow-ish (B low, G and R high): there are many such pixels.
+    yellow = (frame[:, :, 0] < 150) & (frame[:, :, 1] > 150) & (frame[:, :, 2] > 200)
+    assert yellow.sum() > 100
+
+
+def test_birdseye_without_laser_topics_is_a_clear_error(shared_data, tmp_path):
+    bag = shared_data / "rgbd/tue_rgbd_people/2019-05-03-12-42-34.bag"
+    result = subprocess.run([sys.executable, "-m", "fusiontrack", "birdseye", str(bag), "-o", str(tmp_path / "v.mp4")],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2
+    assert "no LaserScan topic" in result.stderr
+
+
+def test_demo_writes_its_outputs(shared_data, tmp_path):
+    out = tmp_path / "demo"
+    run("demo", "-o", str(out), "--recording", str(shared_data / DEMO))
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["input"]["topics"][0]["count"] == 1265
+    assert summary["converted"]["topics"][0]["count"] == 1265
+    assert summary["birdseye"]["frames"] == 1265
+    cap = cv2.VideoCapture(str(out / "birdseye.mp4"))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 1265
+    cap.release()
+    with Recording(out / "recording") as rec:
+        assert isinstance(next(iter(rec.messages())), LaserScan)

@@ -1,0 +1,214 @@
+"""IMU CSV reading, checked against the facts stated for the Oxford Step Counter data set."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fusiontrack.errors import ConfigError, RecordingError
+from fusiontrack.io.csvtable import read_numeric_table
+from fusiontrack.io.imu_csv import detect_imu_csv_format, read_imu_csv
+from fusiontrack.types import ImuSample
+
+OXFORD = Path("/work/shared/data/imu/oxford_step_counter")
+VALIDATION = OXFORD / "validation"
+OPTIMISATION = OXFORD / "optimisation"
+needs_oxford = pytest.mark.skipif(not OXFORD.is_dir(), reason="Oxford step counter data not available")
+
+
+def _validation_file(position: str) -> Path:
+    (path,) = VALIDATION.glob(f"user1_{position}_*.csv")
+    return path
+
+
+def _stats_row(trace: str) -> dict[str, str]:
+    """The row of optimisation/stats.csv for one trace (header: ``#dir, user, ..., duration(s), steps``)."""
+    with (OPTIMISATION / "stats.csv").open(newline="") as f:
+        rows = [[c.strip() for c in row] for row in csv.reader(f) if row]
+    header = [h.lstrip("#").strip() for h in rows[0]]
+    (row,) = [r for r in rows[1:] if r[0] == trace]
+    return dict(zip(header, row, strict=True))
+
+
+# -- validation traces (README: six traces, 100 Hz, ~200 s, final ground truth 326-361) ------------
+
+
+@needs_oxford
+def test_validation_final_counts_rate_and_duration() -> None:
+    files = sorted(VALIDATION.glob("*.csv"))
+    assert len(files) == 6
+    finals = []
+    for path in files:
+        imu = read_imu_csv(path)
+        assert imu.format == "oxford_validation"
+        finals.append(imu.n_steps_gt)
+        assert 326 <= imu.n_steps_gt <= 361
+        assert imu.rate_hz == pytest.approx(100.0, rel=0.01)
+        assert 180 <= imu.duration_s <= 220
+        assert np.all(imu.steps_hw_cum == 0)  # README: the hardware counter is 0 for user 1
+        # cumulative counts never decrease; one ground-truth step time per counted step
+        assert np.all(np.diff(imu.steps_gt_cum) >= 0)
+        assert imu.step_times_ns.size == imu.n_steps_gt
+    assert min(finals) == 326
+
+
+@needs_oxford
+@pytest.mark.parametrize(("position", "gt", "app"), [("hand", 326, 311), ("backpocket", 343, 501)])
+def test_validation_readme_examples(position: str, gt: int, app: int) -> None:
+    imu = read_imu_csv(_validation_file(position), sensor="phone")
+    assert imu.steps_gt_cum[-1] == gt
+    assert imu.steps_app_cum[-1] == app
+    n = len(imu)
+    assert imu.t_ns.shape == (n,)
+    assert imu.t_ns.dtype == np.int64
+    assert imu.accel_mps2.shape == (n, 3)
+    assert np.isnan(imu.gyro_radps).all()
+    # units are m/s^2, not g: the mean specific force of a walk is gravity plus some jostling
+    assert 9.0 < np.linalg.norm(imu.accel_mps2, axis=1).mean() < 13.0
+
+
+@needs_oxford
+def test_validation_samples_are_records() -> None:
+    path = _validation_file("hand")
+    imu = read_imu_csv(path, sensor="phone", frame_id="phone_imu")
+    samples = imu.samples
+    assert len(samples) == len(imu)
+    assert samples is imu.samples  # built once
+    s = samples[1]
+    assert isinstance(s, ImuSample)
+    assert (s.sensor, s.frame_id) == ("phone", "phone_imu")
+    # second line of the file: 1012471532132,0.48243165,2.4528596,4.9643774,0,0,0
+    assert s.t_ns == 1012471532132
+    np.testing.assert_array_equal(s.accel_mps2, [0.48243165, 2.4528596, 4.9643774])
+    assert np.isnan(s.gyro_radps).all()
+
+
+# -- optimisation traces: step events against stats.csv ---------------------------------------------
+
+
+@needs_oxford
+@pytest.mark.parametrize("trace", ["Pixel_Jamie_Hard_InHand_1", "Pixel_Jamie_Hard_FrontPocket_1"])
+def test_optimisation_step_events_match_stats(trace: str) -> None:
+    stats = _stats_row(trace)
+    imu = read_imu_csv(OPTIMISATION / trace)
+    assert imu.format == "oxford_optimisation"
+    assert imu.path.name == "accelerometer.csv"
+    # each change of the toggling gt_step_event level is one step: their number is stats.csv's count
+    assert imu.step_times_ns.size == imu.n_steps_gt == int(stats["steps"])
+    assert abs(imu.duration_s - float(stats["duration(s)"])) < 2.0
+    assert np.all(np.diff(imu.step_times_ns) > 0)
+    assert imu.t_ns[0] <= imu.step_times_ns[0]
+    assert imu.step_times_ns[-1] <= imu.t_ns[-1]
+    # a walking cadence: 1.5-2.2 steps per second between the first and last step
+    span_s = (imu.step_times_ns[-1] - imu.step_times_ns[0]) * 1e-9
+    assert 1.5 < (imu.step_times_ns.size - 1) / span_s < 2.2
+    # The data README says "~100 Hz" for these traces; the Pixel's accelerometer actually runs at ~405 Hz
+    # (66544 and 61406 rows over 164 s and 151 s).
+    assert 395 < imu.rate_hz < 415
+    assert imu.hw_step_times_ns is not None
+    assert imu.steps_gt_cum is None
+
+
+@needs_oxford
+def test_optimisation_accelerometer_file_alone(tmp_path: Path) -> None:
+    src = OPTIMISATION / "Pixel_Jamie_Hard_InHand_1" / "accelerometer.csv"
+    by_name = read_imu_csv(src)  # the file named accelerometer.csv: steps found next to it
+    assert by_name.n_steps_gt == 292
+    lonely = tmp_path / "acc_copy.csv"
+    lonely.write_text("".join(src.read_text().splitlines(keepends=True)[:1000]))
+    assert detect_imu_csv_format(lonely) == "oxford_optimisation"
+    imu = read_imu_csv(lonely)
+    assert len(imu) == 1000
+    assert imu.step_times_ns is None
+    assert imu.n_steps_gt is None
+
+
+# -- generic format --------------------------------------------------------------------------------
+
+
+def test_generic_t_s_with_gyro(tmp_path: Path) -> None:
+    p = tmp_path / "phone.csv"
+    p.write_text("# my phone\nt_s,ax,ay,az,gx,gy,gz,temp\n"
+                 "0.5,0,0,9.81,0.1,0.2,0.3,20\n"
+                 "0.51,0.1,0,9.8,0.1,0.2,0.3,20\n\n"
+                 "0.52,0.2,0,9.7,nan,0.2,0.3,21\n")
+    imu = read_imu_csv(p)
+    assert imu.format == "generic"
+    np.testing.assert_array_equal(imu.t_ns, [500_000_000, 510_000_000, 520_000_000])
+    np.testing.assert_array_equal(imu.accel_mps2[:, 2], [9.81, 9.8, 9.7])
+    np.testing.assert_array_equal(imu.gyro_radps[0], [0.1, 0.2, 0.3])
+    assert np.isnan(imu.gyro_radps[2, 0])
+    assert imu.samples[0].gyro_radps[1] == 0.2
+
+
+def test_generic_t_ns_exact_and_column_order(tmp_path: Path) -> None:
+    t0 = 1_700_000_000_123_456_789  # beyond float64's exact integers
+    p = tmp_path / "phone.csv"
+    p.write_text("az,ay,ax,t_ns\n" + "".join(f"9.8,{i},0,{t0 + i}\n" for i in range(3)))
+    imu = read_imu_csv(p, format="generic")
+    np.testing.assert_array_equal(imu.t_ns, t0 + np.arange(3))
+    np.testing.assert_array_equal(imu.accel_mps2[:, 1], [0, 1, 2])
+    assert np.isnan(imu.gyro_radps).all()
+
+
+def test_generic_header_errors(tmp_path: Path) -> None:
+    p = tmp_path / "phone.csv"
+    p.write_text("time,ax,ay,az\n1,0,0,9.8\n")
+    with pytest.raises(RecordingError, match=r"phone\.csv, line 1: header .*t_ns or t_s"):
+        read_imu_csv(p)
+    p.write_text("t_s,ax,ay,az,gx\n1,0,0,9.8,0\n")
+    with pytest.raises(RecordingError, match="only some of gx, gy, gz"):
+        read_imu_csv(p)
+
+
+# -- errors ----------------------------------------------------------------------------------------
+
+
+def test_bad_rows_name_file_and_line(tmp_path: Path) -> None:
+    p = tmp_path / "user9_hand.csv"
+    good = "1000,0.1,0.2,9.8,0,0,0\n"
+    p.write_text(good * 3 + "1040,0.1,0.2,9.8,0,0\n" + good)
+    with pytest.raises(RecordingError, match=r"user9_hand\.csv, line 4: expected 7 comma-separated values"):
+        read_imu_csv(p)
+    p.write_text(good * 2 + "1030,0.1,abc,9.8,0,0,0\n")
+    with pytest.raises(RecordingError, match=r"user9_hand\.csv, line 3, column 3: expected a number"):
+        read_imu_csv(p)
+    p.write_text(good + "10x0,0.1,0.2,9.8,0,0,0\n")
+    with pytest.raises(RecordingError, match=r"line 2, column 1: expected an integer"):
+        read_imu_csv(p, format="oxford_validation")
+    p.write_text("2000,0.1,0.2,9.8,0,0,0\n1000,0.1,0.2,9.8,0,1,0\n")
+    with pytest.raises(RecordingError, match=r"line 2: time goes backwards"):
+        read_imu_csv(p)
+    p.write_text("2000,0.1,0.2,9.8,0,0.5,0\n")
+    with pytest.raises(RecordingError, match=r"line 1: steps_by_ground_truth must be a whole number"):
+        read_imu_csv(p)
+
+
+def test_missing_empty_and_unknown(tmp_path: Path) -> None:
+    with pytest.raises(RecordingError, match=r"nope\.csv: no such file"):
+        read_imu_csv(tmp_path / "nope.csv")
+    empty = tmp_path / "empty.csv"
+    empty.write_text("\n")
+    with pytest.raises(RecordingError, match=r"empty\.csv: no data rows"):
+        read_imu_csv(empty, format="oxford_validation")
+    odd = tmp_path / "odd.csv"
+    odd.write_text("1,2,3\n")
+    with pytest.raises(RecordingError, match=r"odd\.csv, first line: 3 columns without a header"):
+        read_imu_csv(odd)
+    with pytest.raises(ConfigError, match="format"):
+        read_imu_csv(odd, format="android")
+    with pytest.raises(RecordingError, match=r"without accelerometer\.csv"):
+        read_imu_csv(tmp_path)
+
+
+def test_read_numeric_table_keeps_line_numbers(tmp_path: Path) -> None:
+    p = tmp_path / "t.csv"
+    p.write_text("a,b\n\n# c\n1,2\n3,4\n")
+    table = read_numeric_table(p, header=True, int_cols=(0,))
+    assert table.header == ["a", "b"]
+    np.testing.assert_array_equal(table.line_numbers, [4, 5])
+    np.testing.assert_array_equal(table.ints[0], [1, 3])
+    assert len(table) == 2
