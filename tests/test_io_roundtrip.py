@@ -37,6 +37,7 @@ def sample_records(rng: np.random.Generator, t0: int = 1_700_000_000_000_000_000
         Image(t0 + 30, "cam0", "cam0_optical", rng.integers(0, 256, (48, 64, 3), dtype=np.uint8), "bgr8"),
         Image(t0 + 31, "cam0", "cam0_optical", rng.integers(0, 256, (48, 64, 3), dtype=np.uint8), "rgb8"),
         Image(t0 + 32, "cam1", "cam1_optical", rng.integers(0, 256, (48, 64), dtype=np.uint8), "mono8"),
+        Image(t0 + 33, "cam1_labels", "cam1_optical", rng.integers(0, 65536, (48, 64), dtype=np.uint16), "mono16"),
         DepthImage(t0 + 40, "rgbd0", "rgbd0_optical", depth),
         ImuSample(t0 + 50, "phone_alice", "phone", [0.1, 0.2, 9.8], [0.01, 0.02, 0.03]),
         ImuSample(t0 + 51, "phone_alice", "phone", [0.1, 0.2, 9.8], orientation_xyzw=q),
@@ -78,6 +79,7 @@ def test_png_images_round_trip_losslessly(tmp_path):
         Image(100, "cam0", "cam0", rng.integers(0, 256, (40, 50, 3), dtype=np.uint8), "bgr8"),
         Image(101, "cam0", "cam0", rng.integers(0, 256, (40, 50, 3), dtype=np.uint8), "rgb8"),
         Image(102, "cam0", "cam0", rng.integers(0, 256, (40, 50), dtype=np.uint8), "mono8"),
+        Image(104, "labels", "cam0", rng.integers(0, 65536, (40, 50), dtype=np.uint16), "mono16"),
         DepthImage(103, "rgbd", "rgbd", depth_mm / 1000.0),
     ]
     write_recording(tmp_path / "png", records, image_format="png")
@@ -85,11 +87,13 @@ def test_png_images_round_trip_losslessly(tmp_path):
         types = {t.msgtype for t in rec.topics().values()}
         back = list(rec.messages())
     assert types == {"sensor_msgs/msg/CompressedImage"}
-    for a, b in zip(records[:3], back[:3], strict=True):
-        assert records_equal(a, b)
+    back_by_t = {r.t_ns: r for r in back}
+    for a in records[:4]:
+        assert records_equal(a, back_by_t[a.t_ns])
     # compressedDepth holds millimetres: equal to float32 rounding of mm / 1000
-    np.testing.assert_allclose(back[3].depth_m, records[3].depth_m, rtol=0, atol=1e-6)
-    assert np.array_equal(np.isnan(back[3].depth_m), np.isnan(records[3].depth_m))
+    depth_in, depth_out = records[4].depth_m, back_by_t[103].depth_m
+    np.testing.assert_allclose(depth_out, depth_in, rtol=0, atol=1e-6)
+    assert np.array_equal(np.isnan(depth_out), np.isnan(depth_in))
 
 
 def test_writer_refuses_to_overwrite(tmp_path):

@@ -167,9 +167,11 @@ class Image:
 
     Attributes
     ----------
-    pixels : (H, W, 3) uint8 for ``rgb8``/``bgr8``, (H, W) uint8 for ``mono8``
+    pixels : (H, W, 3) uint8 for ``rgb8``/``bgr8``, (H, W) uint8 for ``mono8``, (H, W) uint16 for ``mono16``
     encoding : str
-        ``"bgr8"`` (OpenCV's order, what decoders and the simulator produce), ``"rgb8"`` or ``"mono8"``.
+        ``"bgr8"`` (OpenCV's order, what decoders and the simulator produce), ``"rgb8"``, ``"mono8"``, or
+        ``"mono16"`` (16-bit intensities or labels: the simulator's per-pixel agent labels). A 16-bit
+        *depth* image is ``16UC1`` in ROS and becomes a :class:`DepthImage`.
     """
 
     t_ns: int
@@ -178,14 +180,15 @@ class Image:
     pixels: np.ndarray
     encoding: str = "bgr8"
 
-    _SHAPES = MappingProxyType({"bgr8": 3, "rgb8": 3, "mono8": 2})
+    _SHAPES = MappingProxyType({"bgr8": 3, "rgb8": 3, "mono8": 2, "mono16": 2})
 
     def __post_init__(self) -> None:
         _set(self, "t_ns", _check_time(self.t_ns))
         if self.encoding not in self._SHAPES:
             raise ValueError(f"Image.encoding: expected one of {sorted(self._SHAPES)}, got {self.encoding!r}")
         shape: tuple[int | None, ...] = (None, None, 3) if self._SHAPES[self.encoding] == 3 else (None, None)
-        _set(self, "pixels", _frozen_array(self.pixels, np.uint8, shape, f"Image.pixels ({self.encoding})"))
+        dtype = np.uint16 if self.encoding == "mono16" else np.uint8
+        _set(self, "pixels", _frozen_array(self.pixels, dtype, shape, f"Image.pixels ({self.encoding})"))
 
     @property
     def height(self) -> int:
@@ -201,7 +204,8 @@ class Image:
             return self.pixels
         if self.encoding == "rgb8":
             return self.pixels[:, :, ::-1]
-        return np.repeat(self.pixels[:, :, None], 3, axis=2)
+        grey = self.pixels if self.encoding == "mono8" else (self.pixels >> 8).astype(np.uint8)
+        return np.repeat(grey[:, :, None], 3, axis=2)
 
 
 @dataclass(frozen=True, slots=True, eq=False)

@@ -3,7 +3,7 @@
 Both directions live here so that a write-then-read round trip is exact by construction: every
 ``to_ros`` function has a matching ``from_ros`` that inverts it field by field.
 
-Standard types handled: sensor_msgs LaserScan, Image (rgb8, bgr8, mono8, 16UC1, 32FC1),
+Standard types handled: sensor_msgs LaserScan, Image (rgb8, bgr8, mono8, mono16, 16UC1, 32FC1),
 CompressedImage (jpeg/png, and ``compressedDepth`` PNG), Imu, CameraInfo; nav_msgs Odometry;
 tf2_msgs TFMessage (tf and tf_static). Annotation types: ``leg_tracker/msg/Person`` (the hand
 annotations of the leg_tracker benchmarks), geometry_msgs PoseArray (leg_tracker's training labels),
@@ -147,16 +147,19 @@ def image_from_ros(msg: Any, t_ns: int, sensor: str, topic: str) -> Image | Dept
         return Image(t_ns, sensor, frame, _image_array(msg, np.uint8, 3, topic), enc)
     if enc in ("mono8", "8uc1"):
         return Image(t_ns, sensor, frame, _image_array(msg, np.uint8, 1, topic), "mono8")
+    if enc == "mono16":  # 16-bit intensities (or labels); 16UC1 is REP 118's depth encoding
+        return Image(t_ns, sensor, frame, _image_array(msg, np.uint16, 1, topic), "mono16")
     if enc in ("32fc1",):
         depth = _image_array(msg, np.float32, 1, topic)
         return DepthImage(t_ns, sensor, frame, depth)
-    if enc in ("16uc1", "mono16"):
+    if enc == "16uc1":
         mm = _image_array(msg, np.uint16, 1, topic)
         depth = mm.astype(np.float32) / 1000.0
         depth[mm == 0] = np.nan
         return DepthImage(t_ns, sensor, frame, depth)
     raise MessageTypeError(
-        f"{topic}: image encoding {msg.encoding!r} is not supported (expected rgb8, bgr8, mono8, 16UC1 or 32FC1)"
+        f"{topic}: image encoding {msg.encoding!r} is not supported "
+        "(expected rgb8, bgr8, mono8, mono16, 16UC1 or 32FC1)"
     )
 
 
@@ -175,7 +178,7 @@ def compressed_from_ros(msg: Any, t_ns: int, sensor: str, topic: str) -> Image |
     if pixels is None:
         raise MessageTypeError(f"{topic}: cannot decode a compressed image (format {msg.format!r}, {data.size} bytes)")
     if pixels.ndim == 2:
-        return Image(t_ns, sensor, msg.header.frame_id, pixels.astype(np.uint8), "mono8")
+        return Image(t_ns, sensor, msg.header.frame_id, pixels, "mono16" if pixels.dtype == np.uint16 else "mono8")
     if pixels.shape[2] == 4:
         pixels = cv2.cvtColor(pixels, cv2.COLOR_BGRA2BGR)
     if fmt.startswith("rgb8"):  # image_transport's "rgb8; jpeg compressed bgr8": the source was RGB
