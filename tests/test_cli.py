@@ -1,4 +1,4 @@
-"""The CLI as a user runs it: info, convert, birdseye and demo on real recordings."""
+"""The CLI as a user runs it: info, convert, view and demo on real recordings."""
 
 from __future__ import annotations
 
@@ -63,9 +63,9 @@ def test_convert_applies_config_sensor_names_and_clock_offsets(shared_data, tmp_
     assert np.array_equal(scans[0].ranges_m, first_in.ranges_m, equal_nan=True)
 
 
-def test_birdseye_draws_the_scans_where_the_laser_saw_them(shared_data, tmp_path):
+def test_view_draws_the_scans_where_the_laser_saw_them(shared_data, tmp_path):
     video = tmp_path / "scans.mp4"
-    run("birdseye", str(shared_data / DEMO), "-o", str(video), "--max-frames", "30")
+    run("view", str(shared_data / DEMO), "-o", str(video), "--max-frames", "30")
     cap = cv2.VideoCapture(str(video))
     assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 30
     ok, frame = cap.read()
@@ -76,12 +76,26 @@ def test_birdseye_draws_the_scans_where_the_laser_saw_them(shared_data, tmp_path
     assert yellow.sum() > 100
 
 
-def test_birdseye_without_laser_topics_is_a_clear_error(shared_data, tmp_path):
+def test_view_of_a_real_rgbd_bag_shows_the_image(shared_data, tmp_path):
     bag = shared_data / "rgbd/tue_rgbd_people/2019-05-03-12-42-34.bag"
-    result = subprocess.run([sys.executable, "-m", "fusiontrack", "birdseye", str(bag), "-o", str(tmp_path / "v.mp4")],
-                            capture_output=True, text=True, timeout=120)
+    run("view", str(bag), "-o", str(tmp_path / "v.mp4"))
+    cap = cv2.VideoCapture(str(tmp_path / "v.mp4"))
+    ok, frame = cap.read()
+    cap.release()
+    assert ok
+    assert frame.shape[1] > frame.shape[0]  # the bird's-eye panel beside the camera image
+    assert frame[:, -300:].std() > 20  # the camera half holds a real picture
+
+
+def test_view_without_lasers_or_images_is_a_clear_error(tmp_path):
+    from fusiontrack.io.writer import write_recording
+    from fusiontrack.types import ImuSample
+
+    write_recording(tmp_path / "imu", [ImuSample(10**18 + i, "phone", "phone", [0, 0, 9.8]) for i in range(3)])
+    result = subprocess.run([sys.executable, "-m", "fusiontrack", "view", str(tmp_path / "imu"), "-o",
+                             str(tmp_path / "v.mp4")], capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
-    assert "no LaserScan topic" in result.stderr
+    assert "nothing to preview" in result.stderr
 
 
 def test_demo_writes_its_outputs(shared_data, tmp_path):
@@ -90,8 +104,8 @@ def test_demo_writes_its_outputs(shared_data, tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["input"]["topics"][0]["count"] == 1265
     assert summary["converted"]["topics"][0]["count"] == 1265
-    assert summary["birdseye"]["frames"] == 1265
-    cap = cv2.VideoCapture(str(out / "birdseye.mp4"))
+    assert summary["preview"]["frames"] == 1265
+    cap = cv2.VideoCapture(str(out / "preview.mp4"))
     assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 1265
     cap.release()
     with Recording(out / "recording") as rec:

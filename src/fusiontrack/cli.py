@@ -223,78 +223,91 @@ def convert(
 
 
 # --------------------------------------------------------------------------------------------------
-# birdseye
+# view
 # --------------------------------------------------------------------------------------------------
 
 
-def render_birdseye(
-    recordings: Sequence[Path], output: Path, topics: Sequence[str] | None, config_path: Path | None,
-    max_frames: int | None = None,
-) -> dict[str, Any]:
-    """Render laser scans of a recording into a bird's-eye video; returns what was drawn."""
-    import numpy as np
+@app.command()
+def view(
+    recordings: Annotated[list[Path], typer.Argument(help="Recording(s), simulated or real.")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Video file to write (.mp4 or .avi).")],
+    max_frames: Annotated[int | None, typer.Option(help="Stop after this many frames.")] = None,
+    fps: Annotated[float | None, typer.Option(help="Frame rate of the video (default: the recording's).")] = None,
+) -> None:
+    """A preview video: laser points and ground truth from above, beside the camera image.
 
-    from .geometry import scan_to_world
-    from .io.recording import Recording
-    from .io.sync import Synchronizer
-    from .io.video import write_video
-    from .types import LaserScan
-    from .viz.birdseye import BirdseyeView
+    One frame per camera image (or per laser scan when there is no camera); sensor poses come from
+    the recording's tf_static, so a simulated recording is drawn in the world frame.
+    """
+    from .viz.preview import render_preview
 
-    cfg = _load_config(config_path)
-    colours = [(80, 220, 255), (255, 160, 60), (120, 255, 120), (200, 120, 255)]
-    with Recording(recordings, sensors=cfg.topics()) as rec:
-        infos = rec.topics()
-        lasers = [t.topic for t in infos.values() if t.msgtype == "sensor_msgs/msg/LaserScan"]
-        chosen = list(topics) if topics else lasers
-        if not chosen:
-            raise ConfigError(f"{', '.join(map(str, recordings))}: no LaserScan topic to draw")
-        sensors = [rec.sensor_of(t) for t in chosen]
-        poses = {name: (cfg.sensors[name].pose.matrix() if name in cfg.sensors else np.eye(4)) for name in sensors}
-        sync = Synchronizer(cfg.sync.window_ns, cfg.clock_offsets_ns())
-        total = sum(infos[t].count for t in chosen if t in infos)
-        if max_frames:
-            total = min(total, max_frames)
-        scans: list[LaserScan] = []
-        with progress() as bar:
-            for scan in _track(sync(rec.messages(chosen)), bar, "reading scans", total):
-                scans.append(scan)
-                if max_frames and len(scans) >= max_frames:
-                    break
-    if not scans:
-        raise FusiontrackError(f"{', '.join(map(str, recordings))}: the laser topics hold no scans")
-    points = [scan_to_world(s, poses[s.sensor]) for s in scans]
-    view = BirdseyeView.fit(np.concatenate([p[::4] for p in points]), margin_m=0.5)
-    background = view.background()
-    latest: dict[str, np.ndarray] = {}
-    period = float(np.median(np.diff([s.t_ns for s in scans]))) / 1e9 if len(scans) > 1 else 0.1
-    fps = min(max(1.0 / period if period > 0 else 10.0, 1.0), 60.0) / max(len(sensors), 1)
+    with progress() as bar:
+        task = bar.add_task("rendering", total=None)
+        result = render_preview(recordings, output, max_frames=max_frames, fps=fps,
+                                progress=lambda n, total: bar.update(task, completed=n, total=total))
+    what = ", ".join(result.lasers + result.cameras) + (" + ground truth" if result.truth else "")
+    console.print(f"wrote {result.frames} frames of {what} to {output}")
 
-    def frames() -> Iterator[np.ndarray]:
-        for scan, pts in zip(scans, points, strict=True):
-            latest[scan.sensor] = pts
-            img = background.copy()
-            for i, name in enumerate(sensors):
-                if name in latest:
-                    view.draw_points(img, latest[name], colours[i % len(colours)], radius_px=1)
-            yield view.label(img, f"{(scan.t_ns - scans[0].t_ns) / 1e9:7.2f} s  {scan.sensor}")
 
-    n = write_video(output, frames(), fps=max(fps, 1.0))
-    return {"frames": n, "scans": len(scans), "sensors": sensors, "fps": fps, "size_px": list(view.size_px)}
+# --------------------------------------------------------------------------------------------------
+# scenarios, simulate
+# --------------------------------------------------------------------------------------------------
 
 
 @app.command()
-def birdseye(
-    recordings: Annotated[list[Path], typer.Argument(help="Recording(s) with LaserScan topics.")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="Video file to write (.mp4 or .avi).")],
-    topic: Annotated[list[str] | None, typer.Option("--topic", "-t", help="Laser topic (repeatable); "
-                                                    "default: all LaserScan topics.")] = None,
-    config: Annotated[Path | None, typer.Option("--config", "-c", help="Pipeline file with sensor poses.")] = None,
-    max_frames: Annotated[int | None, typer.Option(help="Stop after this many scans.")] = None,
+def scenarios() -> None:
+    """List the built-in simulator scenarios with a one-line description."""
+    from .sim.scenario import builtin_names, load_scenario
+
+    table = Table(show_edge=False, header_style="bold")
+    for col in ("scenario", "seconds", "sensors", "description"):
+        table.add_column(col)
+    for name in builtin_names():
+        sc = load_scenario(name)
+        c = sc.config
+        sensors = f"{len(c.lasers)} laser, {len(c.cameras)} camera, {len(c.phones)} phone"
+        table.add_row(name, f"{c.scenario.duration_s:g}", sensors, sc.description)
+    console.print(table)
+    console.print("Simulate one with: fusiontrack simulate NAME -o out/NAME  (or pass your own .toml file)")
+
+
+def _parse_settings(items: list[str] | None) -> dict[str, Any]:
+    import tomllib
+
+    out: dict[str, Any] = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"--set {item!r}: expected KEY=VALUE, e.g. --set agents.mean_present=12")
+        try:
+            out[key.strip()] = tomllib.loads(f"v = {value.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            out[key.strip()] = value.strip()  # a bare word: a string
+    return out
+
+
+@app.command()
+def simulate(
+    scenario: Annotated[str, typer.Argument(help="Built-in scenario name (see `fusiontrack scenarios`) or a "
+                                                 "scenario .toml file.")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Folder of the new recording (rosbag2 MCAP).")],
+    seconds: Annotated[float | None, typer.Option(help="Duration (default: the scenario's).")] = None,
+    seed: Annotated[int | None, typer.Option(help="Random seed (default: the scenario's).")] = None,
+    set_: Annotated[list[str] | None, typer.Option("--set", help="Override any scenario value, e.g. "
+                                                   "--set agents.mean_present=12 (repeatable).")] = None,
 ) -> None:
-    """Draw the laser scans of a recording from above (world frame when poses are configured)."""
-    result = render_birdseye(recordings, output, topic, config, max_frames)
-    console.print(f"wrote {result['frames']} frames ({result['size_px'][0]}x{result['size_px'][1]}) to {output}")
+    """Simulate a scenario into a recording with ground truth (MCAP + CSV in OUTPUT/ground_truth)."""
+    from .sim.scenario import load_scenario
+    from .sim.simulator import simulate as run_simulation
+
+    sc = load_scenario(scenario).with_overrides(seconds=seconds, seed=seed, settings=_parse_settings(set_))
+    duration = sc.config.scenario.duration_s
+    with progress() as bar:
+        task = bar.add_task(f"simulating {sc.name}", total=duration)
+        result = run_simulation(sc, output, progress=lambda t: bar.update(task, completed=t))
+    msgs = ", ".join(f"{name} {n}" for name, n in result.messages.items())
+    console.print(f"wrote {output}: {duration:g} s, {result.n_agents} agents ({result.mean_present:.1f} present on "
+                  f"average), messages: {msgs}")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -311,7 +324,7 @@ def demo(
     """Run the most complete job fusiontrack has on a real laser recording.
 
     Describes the recording, converts it to a time-synchronised MCAP, reads that back and renders a
-    bird's-eye video of the scans; writes ``summary.json`` with what was measured.
+    preview video of the scans; writes ``summary.json`` with what was measured.
     """
     import shutil
 
@@ -326,11 +339,14 @@ def demo(
         shutil.rmtree(mcap_dir)
     convert([recording], mcap_dir)
     round_trip = describe_recording([mcap_dir])
-    video = output / "birdseye.mp4"
-    drawn = render_birdseye([mcap_dir], video, None, None)
-    summary = {"input": desc, "converted": round_trip, "birdseye": {"path": str(video), **drawn}}
+    from .viz.preview import render_preview
+
+    video = output / "preview.mp4"
+    drawn = render_preview([mcap_dir], video)
+    summary = {"input": desc, "converted": round_trip,
+               "preview": {"path": str(video), "frames": drawn.frames, "size_px": list(drawn.size_px)}}
     (output / "summary.json").write_text(json.dumps(summary, indent=2))
-    console.print(f"bird's-eye video: {video} ({drawn['frames']} frames); summary: {output / 'summary.json'}")
+    console.print(f"preview video: {video} ({drawn.frames} frames); summary: {output / 'summary.json'}")
 
 
 def main() -> None:

@@ -115,6 +115,16 @@ def _location(loc: tuple[Any, ...]) -> str:
     return ".".join(str(p) for p in loc) or "(top level)"
 
 
+def parse_error_message(err: ValidationError, source: str) -> str:
+    """One line naming ``source`` and every offending field with what was expected and what was given."""
+    problems = []
+    for e in err.errors():
+        given = e.get("input")
+        shown = "" if isinstance(given, dict) else f" (got {given!r})"
+        problems.append(f"{_location(e['loc'])}: {e['msg']}{shown}")
+    return f"{source}: " + "; ".join(problems)
+
+
 def parse_config(data: dict[str, Any], source: str = "<config>") -> PipelineConfig:
     """Validate a pipeline mapping (as loaded from TOML).
 
@@ -126,12 +136,7 @@ def parse_config(data: dict[str, Any], source: str = "<config>") -> PipelineConf
     try:
         return PipelineConfig.model_validate(data)
     except ValidationError as err:
-        problems = []
-        for e in err.errors():
-            given = e.get("input")
-            shown = "" if isinstance(given, dict) else f" (got {given!r})"
-            problems.append(f"{_location(e['loc'])}: {e['msg']}{shown}")
-        raise ConfigError(f"{source}: " + "; ".join(problems)) from err
+        raise ConfigError(parse_error_message(err, source)) from err
 
 
 def load_config(path: str | Path) -> PipelineConfig:

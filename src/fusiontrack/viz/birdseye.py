@@ -34,17 +34,27 @@ class BirdseyeView:
             raise ValueError(f"px_per_m: expected > 0, got {self.px_per_m}")
 
     @classmethod
-    def fit(cls, points_m: np.ndarray, margin_m: float = 0.5, px_per_m: float = 60.0,
-            max_px: int = 960) -> BirdseyeView:
-        """A window around all finite points, with the resolution lowered so no side exceeds ``max_px``."""
+    def fit(cls, points_m: np.ndarray, margin_m: float = 0.5, px_per_m: float = 60.0, max_px: int = 960,
+            min_span_m: float = 4.0, height_px: int | None = None) -> BirdseyeView:
+        """A window around all finite points (at least ``min_span_m`` on each side).
+
+        The resolution is ``px_per_m``, lowered so no side exceeds ``max_px``; with ``height_px`` the
+        picture is instead exactly that tall (and at most twice as wide).
+        """
         pts = np.asarray(points_m, np.float64).reshape(-1, 2)
         pts = pts[np.all(np.isfinite(pts), axis=1)]
         if pts.size == 0:
             pts = np.zeros((1, 2))
         lo = pts.min(axis=0) - margin_m
         hi = pts.max(axis=0) + margin_m
-        span = max(float((hi - lo).max()), 1e-3)
-        return cls((float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1])), min(px_per_m, max_px / span))
+        grow = np.maximum(min_span_m - (hi - lo), 0.0) / 2
+        lo, hi = lo - grow, hi + grow
+        span = hi - lo
+        if height_px is not None:
+            px_per_m = min(height_px / span[1], 2 * height_px / span[0])
+        else:
+            px_per_m = min(px_per_m, max_px / float(span.max()))
+        return cls((float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1])), px_per_m)
 
     @property
     def size_px(self) -> tuple[int, int]:
