@@ -110,3 +110,29 @@ def test_demo_writes_its_outputs(shared_data, tmp_path):
     cap.release()
     with Recording(out / "recording") as rec:
         assert isinstance(next(iter(rec.messages())), LaserScan)
+
+
+def test_scenarios_simulate_and_view(tmp_path):
+    listing = run("scenarios").stdout
+    for name in ("crossing", "groups", "crowd", "corridor", "road"):
+        assert name in listing
+    rec = tmp_path / "sim"
+    out = run("simulate", "crossing", "--seconds", "2", "--seed", "4", "--set", "agents.n_people=2", "-o", str(rec))
+    assert "laser_0" in out.stdout
+    with Recording(rec) as r:
+        assert r.topics()["/laser_0/scan"].count == 50
+    run("view", str(rec), "-o", str(tmp_path / "v.mp4"))
+    cap = cv2.VideoCapture(str(tmp_path / "v.mp4"))
+    n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+    ok, frame = cap.read()
+    cap.release()
+    assert n == 30  # one per camera frame: 2 s at 15 Hz
+    assert ok
+    assert frame.shape[1] > 2 * frame.shape[0] * 0.9  # bird's-eye panel + camera image side by side
+
+
+def test_simulate_refuses_an_unknown_scenario(tmp_path):
+    result = subprocess.run([sys.executable, "-m", "fusiontrack", "simulate", "crowed", "-o", str(tmp_path / "x")],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert "unknown scenario 'crowed'" in result.stderr

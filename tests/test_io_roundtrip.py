@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fusiontrack.io.recording import Recording
-from fusiontrack.io.writer import RecordingWriter, write_recording
+from fusiontrack.io.writer import RecordingWriter, default_topic, write_recording
 from fusiontrack.types import (
     CameraInfo,
     DepthImage,
@@ -66,7 +66,14 @@ def test_round_trip_is_identical_message_by_message(tmp_path, storage):
     assert write_recording(path, records, storage=storage) == len(records)
     with Recording(path) as rec:
         back = list(rec.messages())
+        topics = rec.topics()
     assert len(back) == len(records)
+    expected_counts: dict[str, int] = {}
+    for r in records:
+        topic = default_topic(r)
+        expected_counts[topic] = expected_counts.get(topic, 0) + 1
+    assert {t: i.count for t, i in topics.items()} == expected_counts
+    assert topics["/laser_front/scan"].sensor == "laser_front"
     for a, b in zip(records, back, strict=True):
         assert records_equal(a, b), f"{type(a).__name__} differs in {diff(a, b)}"
 

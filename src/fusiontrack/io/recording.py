@@ -201,6 +201,7 @@ class Recording:
             types: dict[str, str] = {}
             for conn in self.connections:
                 types.setdefault(conn.topic, conn.msgtype)
+            for conn in self.connections:
                 times = self._index_times(conn)
                 if times is None:
                     break

@@ -116,11 +116,17 @@ class RecordingWriter:
             self._connections[key] = self._writer.add_connection(topic, msgtype, typestore=self.typestore)
         return self._connections[key]
 
-    def write(self, record: Message, topic: str | None = None, log_t_ns: int | None = None) -> None:
-        """Write one record (log time = the record's time unless ``log_t_ns`` is given)."""
+    def write(self, record: Message, topic: str | None = None, log_t_ns: int | None = None,
+              image_format: Literal["raw", "png"] | None = None) -> None:
+        """Write one record (log time = the record's time unless ``log_t_ns`` is given).
+
+        ``image_format`` overrides the writer's choice for this record (e.g. PNG for label images).
+        """
         topic = topic or default_topic(record)
-        msgtype = self.encoder.msgtype(record)
-        data = self.typestore.serialize_cdr(self.encoder.encode(record), msgtype)
+        encoder = self.encoder if image_format in (None, self.encoder.image_format) else \
+            RosEncoder(self.typestore, image_format)
+        msgtype = encoder.msgtype(record)
+        data = self.typestore.serialize_cdr(encoder.encode(record), msgtype)
         self._writer.write(self._connection(topic, msgtype), record.t_ns if log_t_ns is None else log_t_ns, data)
         if not isinstance(record, Transform):
             self._sensors[topic] = record.sensor

@@ -279,5 +279,5 @@ def call_with_params(fn: Callable[..., Any], params: Mapping[str, Any], section:
                           f"{fn.__name__}; it takes {', '.join(options)}")
     try:
         return fn(**fixed, **params)
-    except (TypeError, ValueError) as err:
+    except (TypeError, ValueError, ConfigError) as err:
         raise ConfigError(f"{source}: [{section}]: {err}") from err
