@@ -33,7 +33,7 @@ def _pair(separation_m: float, n_frames: int = 5) -> list[AgentSnapshot]:
     return [_snap(k, [1, 2], [[0.0, 0.0], [separation_m, 0.0]]) for k in range(n_frames)]
 
 
-@pytest.mark.parametrize(("separation_m", "expected"), [(3.0, N), (0.6, C), (0.3, M)])
+@pytest.mark.parametrize(("separation_m", "expected"), [(3.0, N), (0.7, C), (0.3, M)])
 def test_two_people(separation_m: float, expected: Situation) -> None:
     labels = label_situations(_pair(separation_m), BOUNDS)
     assert len(labels) == 5
@@ -43,8 +43,8 @@ def test_two_people(separation_m: float, expected: Situation) -> None:
 
 
 def test_merged_sets_are_transitive_and_correlated_excludes_merged() -> None:
-    # 1-2 and 2-3 are 0.4 m apart (1-3: 0.8 m): one merged set of three; 4 is 0.6 m from 3: correlated
-    frames = [_snap(k, [1, 2, 3, 4], [[0, 0], [0.4, 0], [0.8, 0], [1.4, 0]]) for k in range(3)]
+    # 1-2 and 2-3 are 0.4 m apart (1-3: 0.8 m): one merged set of three; 4 is 0.7 m from 3: correlated
+    frames = [_snap(k, [1, 2, 3, 4], [[0, 0], [0.4, 0], [0.8, 0], [1.5, 0]]) for k in range(3)]
     for lab in label_situations(frames, BOUNDS):
         assert list(lab) == [M, M, M, C]
 
@@ -96,8 +96,8 @@ def test_person_leaving_is_disappearing() -> None:
 
 
 def test_interaction_takes_precedence_over_the_edge() -> None:
-    # two people step in together at the boundary 0.6 m apart: correlated, not appearing
-    frames = [_snap(k, [1, 2], [[-10.0 + 0.1 * k, 0.0], [-10.0 + 0.1 * k, 0.6]]) for k in range(5)]
+    # two people step in together at the boundary 0.7 m apart: correlated, not appearing
+    frames = [_snap(k, [1, 2], [[-10.0 + 0.1 * k, 0.0], [-10.0 + 0.1 * k, 0.7]]) for k in range(5)]
     for lab in label_situations(frames, BOUNDS):
         assert list(lab) == [C, C]
     counts = situation_counts(situation_events(frames, BOUNDS))
@@ -108,8 +108,8 @@ def test_interaction_takes_precedence_over_the_edge() -> None:
 def _approach_merge_split() -> list[AgentSnapshot]:
     """1 and 2 walk +x side by side; their separation 0.31 + 0.5 |t - 5 s| closes to 0.31 m and reopens.
 
-    Separation < 0.45 m (merged) for |t - 5| < 0.28 s: frames 48..52; < 0.8 m (correlated) for
-    |t - 5| < 0.98 s: frames 41..47 and 53..59. Person 3 walks far away throughout.
+    Separation < 0.6 m (merged) for |t - 5| < 0.58 s: frames 45..55; < 0.8 m (correlated) for
+    |t - 5| < 0.98 s: frames 41..44 and 56..59. Person 3 walks far away throughout.
     """
     frames = []
     for k in range(101):
@@ -122,7 +122,7 @@ def _approach_merge_split() -> list[AgentSnapshot]:
 def test_approach_merge_split_labels() -> None:
     labels = label_situations(_approach_merge_split(), BOUNDS)
     for k, lab in enumerate(labels):
-        want = M if 48 <= k <= 52 else C if 41 <= k <= 59 else N
+        want = M if 45 <= k <= 55 else C if 41 <= k <= 59 else N
         assert list(lab) == [N, want, want], k
 
 
@@ -133,15 +133,15 @@ def test_approach_merge_split_events() -> None:
     assert len(merges) == 1
     assert len(splits) == 1
     assert merges[0].track_ids == (1, 2)
-    assert merges[0].t_ns == 48 * DT_NS
+    assert merges[0].t_ns == 45 * DT_NS
     assert merges[0].attributes["parts"] == ((1,), (2,))
     assert splits[0].track_ids == (1, 2)
-    assert splits[0].t_ns == 53 * DT_NS
+    assert splits[0].t_ns == 56 * DT_NS
     assert splits[0].attributes["parts"] == ((1,), (2,))
     assert all(e.sensor == "gt" for e in events)
     corr = [(e.track_ids, e.t_ns, e.t_end_ns, e.attributes["partners"]) for e in events if e.kind == "correlated"]
-    assert sorted(corr) == [((1,), 41 * DT_NS, 47 * DT_NS, (2,)), ((1,), 53 * DT_NS, 59 * DT_NS, (2,)),
-                            ((2,), 41 * DT_NS, 47 * DT_NS, (1,)), ((2,), 53 * DT_NS, 59 * DT_NS, (1,))]
+    assert sorted(corr) == [((1,), 41 * DT_NS, 44 * DT_NS, (2,)), ((1,), 56 * DT_NS, 59 * DT_NS, (2,)),
+                            ((2,), 41 * DT_NS, 44 * DT_NS, (1,)), ((2,), 56 * DT_NS, 59 * DT_NS, (1,))]
     assert situation_counts(events) == {"merge": 1, "split": 1, "correlated": 4, "appear": 0, "disappear": 0}
     assert [e.t_ns for e in events] == sorted(e.t_ns for e in events)
 
@@ -159,7 +159,7 @@ def test_third_person_joining_a_merged_pair_is_a_merge() -> None:
 
 def test_ground_truth_records_are_accepted() -> None:
     frames = [GroundTruth(t_ns=k * DT_NS, sensor="gt", frame_id="world", ids=[1, 2],
-                          positions_m=[[0.0, 0.0], [0.6, 0.0]]) for k in range(3)]
+                          positions_m=[[0.0, 0.0], [0.7, 0.0]]) for k in range(3)]
     assert all(list(lab) == [C, C] for lab in label_situations(frames, BOUNDS))
 
 

@@ -38,7 +38,7 @@ TAU_S, BODY_RADIUS_M, SPEED_CAP = 0.5, 0.25, 1.3
 A_PERSON, B_PERSON, ANISOTROPY = 4.0, 0.12, 0.3
 A_PREDICT, B_PREDICT, HORIZON_S = 1.2, 0.5, 3.0
 A_WALL, B_WALL, A_SLIDE, B_SLIDE, HARD_CLEARANCE_M = 4.0, 0.12, 2.0, 0.6, 0.2
-STOP_DECEL, GROUP_SPACING_M, GROUP_GAIN = 0.6, 0.75, 0.8
+STOP_DECEL, GROUP_SPACING_M, GROUP_GAIN, GROUP_BODY_M = 0.6, 0.5, 1.5, 0.15
 TAU_HEADING_S, TAU_AMPLITUDE_S, AMPLITUDE_SPEED = 0.3, 0.25, 0.3
 RENDEZVOUS_TIMEOUT_S = 60.0
 # IDM per kind (index = KIND_*): max acceleration, comfortable deceleration, time headway, jam distance
@@ -69,7 +69,7 @@ def feet_positions(position_m: np.ndarray, heading_rad: np.ndarray, phase_rad: n
 
 
 def social_acceleration(pos: np.ndarray, vel: np.ndarray, v_des: np.ndarray, segments: np.ndarray,
-                        radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                        radii: np.ndarray, group: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Social-force acceleration of walkers and their clearance from obstacles.
 
     Terms: relaxation towards the desired velocity; anisotropic exponential repulsion between bodies;
@@ -81,6 +81,8 @@ def social_acceleration(pos: np.ndarray, vel: np.ndarray, v_des: np.ndarray, seg
     ----------
     pos, vel, v_des : (n, 2) — m, m/s, m/s
     segments, radii : (m, 2, 2), (m,) — obstacles as segments with a radius (``worlds.obstacles``)
+    group : (n,) int, optional — walkers sharing a non-negative id walk together: between them the body
+        repulsion keeps only ``GROUP_BODY_M`` apart, so friends walk shoulder to shoulder (~0.5 m)
 
     Returns
     -------
@@ -99,7 +101,10 @@ def social_acceleration(pos: np.ndarray, vel: np.ndarray, v_des: np.ndarray, seg
         nx, ny = dx / dist, dy / dist
         # cosine of the angle between i's heading and the direction to j -> weight 1 ahead, ANISOTROPY behind
         weight = ANISOTROPY + (1 - ANISOTROPY) * 0.5 * (1 - nx * ex[:, None] - ny * ey[:, None])
-        push = A_PERSON * np.exp((2 * BODY_RADIUS_M - dist) / B_PERSON) * weight
+        comfort = np.full(dist.shape, 2 * BODY_RADIUS_M)
+        if group is not None:
+            comfort[(group[:, None] == group[None, :]) & (group[:, None] >= 0)] = GROUP_BODY_M
+        push = A_PERSON * np.exp((comfort - dist) / B_PERSON) * weight
         ax += (push * nx).sum(axis=1)
         ay += (push * ny).sum(axis=1)
         rvx, rvy = vx[:, None] - vx[None, :], vy[:, None] - vy[None, :]
@@ -458,7 +463,8 @@ class Population:
         if grouped.any():
             v_des[grouped] = self._group_velocity(self._gid[a][grouped], p[grouped], e[grouped], v0[grouped])
         v_des[waiting] = 0.0
-        acc, clear = social_acceleration(p, v, v_des, self._segments, self._radii)
+        acc, clear = social_acceleration(p, v, v_des, self._segments, self._radii,
+                                         np.where(grouped, self._gid[a], -1))
         v_new = v + acc * dt
         speed = np.hypot(v_new[:, 0], v_new[:, 1])
         v_new *= np.minimum(1.0, SPEED_CAP * vpref / np.maximum(speed, 1e-9))[:, None]
@@ -539,7 +545,7 @@ class Population:
         v = self._vel[a]
         blocked = (dist < 1.2) & (np.einsum("nk,nk->n", v, g) > -0.15 * dist)
         reached = np.where(self._stop_at[a, tgt], (dist < 0.3) | blocked,
-                           np.where(leave, (dist < 0.5) | outside, passed))
+                           np.where(leave, (dist < 0.2) | outside, passed))
         reached &= ~waiting
         if not reached.any():
             return

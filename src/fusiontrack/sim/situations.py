@@ -7,10 +7,13 @@ B4-B7 *should* see; the evaluation compares the tracker's own situation switches
 
 Definitions (distances between body centres; ``h = 0.40 m`` is B4's mean-shift bandwidth):
 
-``merged`` — another agent within ``d_merged = 0.45 m``.
-    Legs lie within ~0.2 m of their body centre, so two people closer than ~0.45 m put all four legs
-    inside one flat-kernel window of radius ``h`` centred between them: B4 returns one segment, which
-    both targets find (B7 step 1: ``r_j = 2`` with ``c_k = 1``), i.e. they merge. Merged sets are the
+``merged`` — another agent within ``d_merged = 0.6 m``.
+    Legs lie ~0.1 m either side of the walking line, so two people side by side closer than 0.6 m
+    put all four legs inside one flat-kernel window of radius ``h`` centred between them
+    (``d / 2 + 0.1 < h``): B4 returns one segment, which both targets find (B7 step 1: ``r_j = 2``
+    with ``c_k = 1``), i.e. they merge. (Walking in step, the fore-aft spread of the feet makes the
+    strict bound ~0.47 m; mean-shift's modes fuse before every point shares one window, so 0.6 m
+    is the better single number. Friends walking together keep ~0.5 m: they are merged.) Merged sets are the
     connected components of the "within ``d_merged``" graph (A-B and B-C close makes {A, B, C} one
     set, as one segment would swallow all three).
 ``correlated`` — not merged and another agent within ``d_correlated = 0.8 m = 2h``.
@@ -89,7 +92,7 @@ class _Analysis:
     exit: dict[int, tuple[int, np.ndarray, bool]]  # id -> (t_ns, position, leaves on the edge before the end)
 
 
-def label_situations(frames: Sequence[Any], bounds_m: Any, *, d_correlated: float = 0.8, d_merged: float = 0.45,
+def label_situations(frames: Sequence[Any], bounds_m: Any, *, d_correlated: float = 0.8, d_merged: float = 0.6,
                      edge_m: float = 0.5, appear_window_s: float = 1.0) -> list[np.ndarray]:
     """Seed 001's tracking situation of every agent in every frame (see the module docstring).
 
@@ -118,7 +121,7 @@ def label_situations(frames: Sequence[Any], bounds_m: Any, *, d_correlated: floa
     return _analyse(frames, bounds_m, d_correlated, d_merged, edge_m, appear_window_s).labels
 
 
-def situation_events(frames: Sequence[Any], bounds_m: Any, *, d_correlated: float = 0.8, d_merged: float = 0.45,
+def situation_events(frames: Sequence[Any], bounds_m: Any, *, d_correlated: float = 0.8, d_merged: float = 0.6,
                      edge_m: float = 0.5, appear_window_s: float = 1.0, sensor: str = "ground_truth") -> list[Event]:
     """Seed 001's situation events (Table II's true counts) from the ground truth, in time order.
 
