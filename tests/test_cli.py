@@ -100,8 +100,10 @@ def test_view_without_lasers_or_images_is_a_clear_error(tmp_path):
 
 def test_demo_writes_its_outputs(shared_data, tmp_path):
     out = tmp_path / "demo"
-    run("demo", "-o", str(out), "--recording", str(shared_data / DEMO))
+    run("demo", "-o", str(out), "--recording", str(shared_data / DEMO), "--seconds", "3")
     summary = json.loads((out / "summary.json").read_text())
+    assert summary["simulated"]["messages"]["laser_0"] == 75  # 3 s at 25 Hz
+    assert summary["simulated"]["preview_frames"] >= 40  # ~45 camera frames, 1 % of them dropped
     assert summary["input"]["topics"][0]["count"] == 1265
     assert summary["converted"]["topics"][0]["count"] == 1265
     assert summary["preview"]["frames"] == 1265
