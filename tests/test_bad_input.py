@@ -122,7 +122,7 @@ def test_a_good_config_is_typed():
                         "pose": {"x": 1.0, "yaw_deg": 90.0}}}})
     assert cfg.sync.window_ns == 50_000_000
     assert cfg.topics() == {"/scan": "laser_front"}
-    assert cfg.clock_offsets_ns() == {"laser_front": -12_500_000}
+    assert cfg.clock_corrections_ns() == {"laser_front": 12_500_000}  # a clock 12.5 ms behind: add 12.5 ms
     T = cfg.sensors["laser_front"].pose.matrix()
     np.testing.assert_allclose(T[:3, :3] @ [1, 0, 0] + T[:3, 3], [1.0, 1.0, 0.0], atol=1e-12)
 

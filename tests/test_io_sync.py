@@ -57,7 +57,7 @@ def test_clock_offsets_put_sensors_on_one_clock():
              for t in range(0, 1_000_000_000, 100_000_000)]
     frames = [imu(t, "camera") for t in range(0, 1_000_000_000, 40_000_000)]
     out = list(synchronize(merge(scans, frames), window_ns=300_000_000,
-                           clock_offsets_ns={"laser": -200_000_000}))
+                           clock_corrections_ns={"laser": -200_000_000}))
     laser_t = [r.t_ns for r in out if r.sensor == "laser"]
     assert laser_t == list(range(0, 1_000_000_000, 100_000_000))
     assert all(a.t_ns <= b.t_ns for a, b in itertools.pairwise(out))
@@ -72,7 +72,7 @@ def test_bad_window_is_a_config_error(bad):
 
 def test_bad_offset_names_the_sensor():
     with pytest.raises(ConfigError, match="laser_front"):
-        Synchronizer(clock_offsets_ns={"laser_front": 0.2})
+        Synchronizer(clock_corrections_ns={"laser_front": 0.2})
 
 
 def test_b1_clock_offset_and_frame_alignment():

@@ -18,6 +18,7 @@ from typing import Annotated, Any
 import typer
 from rich.console import Console
 from rich.logging import RichHandler
+from rich.markup import escape
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
@@ -208,8 +209,9 @@ def convert(
     if time_source not in ("header", "log"):
         raise ConfigError(f"--time: expected 'header' or 'log', got {time_source!r}")
     cfg = _load_config(config)
-    sync = Synchronizer(cfg.sync.window_ns, cfg.clock_offsets_ns())
+    sync = Synchronizer(cfg.sync.window_ns, cfg.clock_corrections_ns())
     with Recording(recordings, sensors=cfg.topics()) as rec:
+        rec.select(topic)  # unknown or unconvertible topics fail here, before the output exists
         selected = [t for t in rec.topics().values() if (topic is None and t.convertible) or
                     (topic is not None and t.topic in topic)]
         total = sum(t.count for t in selected)
@@ -340,6 +342,9 @@ def demo(
     output.mkdir(parents=True, exist_ok=True)
     for old in (output / "crowd", output / "recording"):
         if old.exists():
+            if not (old / "metadata.yaml").is_file():  # only ever replace a recording the demo wrote
+                raise FusiontrackError(f"{old} exists and is not a recording; the demo will not delete it "
+                                       "(choose another --output)")
             shutil.rmtree(old)
 
     scenario = load_scenario("crowd").with_overrides(seconds=seconds)
@@ -376,7 +381,7 @@ def main() -> None:
     except FusiontrackError as err:
         if os.environ.get("FUSIONTRACK_DEBUG"):
             raise
-        err_console.print(f"[bold red]error:[/] {err}", highlight=False, soft_wrap=True)
+        err_console.print(f"[bold red]error:[/] {escape(str(err))}", highlight=False, soft_wrap=True)
         sys.exit(2)
     except KeyboardInterrupt:
         err_console.print("interrupted")

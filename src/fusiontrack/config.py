@@ -15,7 +15,7 @@ Example::
     kind = "laser"
     topic = "/scan"
     pose = { x = 0.0, y = 0.0, z = 0.2, yaw_deg = 0.0 }
-    clock_offset_ms = 0.0
+    clock_offset_ms = 0.0   # how far this sensor's clock runs ahead; subtracted from its stamps
 
 Later components add their own sections (``[laser]``, ``[tracking]``, ...); unknown keys are an
 error, so a typo never passes silently.
@@ -57,13 +57,11 @@ class Pose(_Model):
     yaw_deg: float = 0.0
 
     def matrix(self) -> np.ndarray:
-        """``sensor2world`` as a 4x4 homogeneous matrix."""
-        from scipy.spatial.transform import Rotation
+        """``sensor2world`` of the sensor's body frame (x forward, z up) as a 4x4 homogeneous matrix."""
+        from .geometry import make_transform, rpy_to_matrix
 
-        T = np.eye(4)
-        T[:3, :3] = Rotation.from_euler("xyz", [self.roll_deg, self.pitch_deg, self.yaw_deg], degrees=True).as_matrix()
-        T[:3, 3] = [self.x, self.y, self.z]
-        return T
+        R = rpy_to_matrix(np.radians(self.roll_deg), np.radians(self.pitch_deg), np.radians(self.yaw_deg))
+        return make_transform(R, [self.x, self.y, self.z])
 
 
 class SensorConfig(_Model):
@@ -72,6 +70,8 @@ class SensorConfig(_Model):
     frame: str = ""
     pose: Pose = Pose()
     clock_offset_ms: float = 0.0
+    """How far this sensor's clock is ahead of the common clock (its stamps = true time + offset), as in
+    the simulator's scenario files; synchronisation subtracts it."""
     info_topic: str = ""
     depth_topic: str = ""
 
@@ -107,8 +107,9 @@ class PipelineConfig(_Model):
                     out[topic] = name
         return out
 
-    def clock_offsets_ns(self) -> dict[str, int]:
-        return {name: s.clock_offset_ns for name, s in self.sensors.items() if s.clock_offset_ms}
+    def clock_corrections_ns(self) -> dict[str, int]:
+        """sensor -> what to add to its stamps to put them on the common clock (``-clock_offset``)."""
+        return {name: -s.clock_offset_ns for name, s in self.sensors.items() if s.clock_offset_ms}
 
 
 def _location(loc: tuple[Any, ...]) -> str:

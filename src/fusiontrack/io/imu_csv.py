@@ -181,7 +181,7 @@ def _toggle_times(t_ns: np.ndarray, level: np.ndarray) -> np.ndarray:
 
 def _int_column(path: Path, table: NumericTable, col: int, name: str) -> np.ndarray:
     x = table.values[:, col]
-    bad = np.flatnonzero(x != np.round(x))
+    bad = np.flatnonzero(~np.isfinite(x) | (x != np.round(x)))
     if bad.size:
         i = int(bad[0])
         raise RecordingError(f"{path}, line {int(table.line_numbers[i])}: {name} must be a whole number, "
@@ -241,7 +241,12 @@ def _read_generic(path: Path, sensor: str, frame_id: str) -> ImuCsv:
             exact = read_numeric_table(path, header=True, int_cols=(col,), what=_GENERIC_DOC)
             t_ns = exact.ints[col]
     else:
-        t_ns = np.rint(table.values[:, names.index("t_s")] * 1e9).astype(np.int64)
+        t_s = table.values[:, names.index("t_s")]
+        bad = np.flatnonzero(~np.isfinite(t_s))
+        if bad.size:
+            raise RecordingError(f"{path}, line {int(table.line_numbers[bad[0]])}: t_s must be a finite number "
+                                 f"of seconds, got {t_s[bad[0]]!r}")
+        t_ns = np.rint(t_s * 1e9).astype(np.int64)
     _check_time_order(path, t_ns, table.line_numbers)
     accel = table.values[:, [names.index(n) for n in ("ax", "ay", "az")]]
     gyro_names = ("gx", "gy", "gz")

@@ -241,6 +241,16 @@ class Recording:
         return np.fromiter((ix.time for ix in indexes[conn.id]), dtype=np.int64)
 
     # ---------------------------------------------------------------------------------------------
+    def select(self, topics: Iterable[str] | None, convertible_only: bool = True) -> list[Connection]:
+        """The connections of ``topics`` (all convertible ones for ``None``).
+
+        Raises
+        ------
+        TopicError, MessageTypeError
+            As :meth:`messages` would, so a caller can check its topics before doing anything else.
+        """
+        return self._select(topics, convertible_only)
+
     def _select(self, topics: Iterable[str] | None, convertible_only: bool) -> list[Connection]:
         conns = self.connections
         if topics is None:

@@ -166,6 +166,10 @@ def image_from_ros(msg: Any, t_ns: int, sensor: str, topic: str) -> Image | Dept
 def compressed_from_ros(msg: Any, t_ns: int, sensor: str, topic: str) -> Image | DepthImage:
     data = np.asarray(msg.data, dtype=np.uint8)
     fmt = msg.format.lower()
+    if "compresseddepth" in fmt and fmt.startswith("32fc1"):
+        # 32-bit compressedDepth holds quantised inverse depth with parameters in its header
+        raise MessageTypeError(f"{topic}: 32FC1 compressedDepth (quantised inverse depth) is not supported; "
+                               "record the depth as 16UC1 compressedDepth or as a raw image")
     if "compresseddepth" in fmt:
         # image_transport's compressedDepth: a 12-byte config header, then a 16-bit PNG in millimetres.
         mm = cv2.imdecode(data[12:], cv2.IMREAD_UNCHANGED)

@@ -49,21 +49,23 @@ class Synchronizer:
         How late (in corrected time, relative to the newest message seen) a message may arrive and
         still be put back in order. Messages are held back for this long, so it is also the latency
         the synchroniser adds. Default 200 ms.
-    clock_offsets_ns : mapping sensor -> ns
-        Added to the ``t_ns`` of that sensor's messages (``t_common = t_sensor + offset``).
+    clock_corrections_ns : mapping sensor -> ns
+        Added to the ``t_ns`` of that sensor's messages (``t_common = t_sensor + correction``); a sensor
+        whose clock runs ``d`` ahead needs ``-d`` (the pipeline file's ``clock_offset_ms`` is ``d``;
+        :func:`estimate_clock_offset` returns the correction itself).
 
     Iterate :meth:`__call__` over a stream; :attr:`dropped` and :attr:`reordered` count what happened.
     """
 
-    def __init__(self, window_ns: int = 200_000_000, clock_offsets_ns: Mapping[str, int] | None = None) -> None:
+    def __init__(self, window_ns: int = 200_000_000, clock_corrections_ns: Mapping[str, int] | None = None) -> None:
         if isinstance(window_ns, bool) or not isinstance(window_ns, int | np.integer) or window_ns < 0:
             raise ConfigError(f"sync window_ns: expected a non-negative integer of nanoseconds, got {window_ns!r}")
-        offsets = dict(clock_offsets_ns or {})
+        offsets = dict(clock_corrections_ns or {})
         for sensor, value in offsets.items():
             if isinstance(value, bool) or not isinstance(value, int | np.integer):
                 raise ConfigError(f"clock offset of sensor {sensor!r}: expected integer nanoseconds, got {value!r}")
         self.window_ns = int(window_ns)
-        self.clock_offsets_ns = {k: int(v) for k, v in offsets.items()}
+        self.clock_corrections_ns = {k: int(v) for k, v in offsets.items()}
         self.dropped: Counter[str] = Counter()
         self.reordered = 0
 
@@ -73,7 +75,7 @@ class Synchronizer:
         newest = None  # newest corrected time seen so far
         last_out = None  # time of the last message let out
         for record in stream:
-            offset = self.clock_offsets_ns.get(record.sensor, 0)
+            offset = self.clock_corrections_ns.get(record.sensor, 0)
             t = record.t_ns + offset
             if offset:
                 record = with_time(record, t)
@@ -99,10 +101,10 @@ class Synchronizer:
 
 
 def synchronize(
-    stream: Iterable[Any], window_ns: int = 200_000_000, clock_offsets_ns: Mapping[str, int] | None = None
+    stream: Iterable[Any], window_ns: int = 200_000_000, clock_corrections_ns: Mapping[str, int] | None = None
 ) -> Iterator[Any]:
-    """Shorthand for ``Synchronizer(window_ns, clock_offsets_ns)(stream)``."""
-    return Synchronizer(window_ns, clock_offsets_ns)(stream)
+    """Shorthand for ``Synchronizer(window_ns, clock_corrections_ns)(stream)``."""
+    return Synchronizer(window_ns, clock_corrections_ns)(stream)
 
 
 def estimate_clock_offset(t1: np.ndarray, t2: np.ndarray, t3: np.ndarray, t4: np.ndarray) -> tuple[int, int]:
@@ -118,7 +120,8 @@ def estimate_clock_offset(t1: np.ndarray, t2: np.ndarray, t3: np.ndarray, t4: np
     Returns
     -------
     offset_ns, delay_ns : int
-        ``t_server = t_client + offset_ns``; ``delay_ns`` is the round trip of the exchange used.
+        ``t_server = t_client + offset_ns`` (so ``offset_ns`` is the client's clock *correction* for
+        :class:`Synchronizer`); ``delay_ns`` is the round trip of the exchange used.
     """
     t1, t2, t3, t4 = (np.asarray(a, np.int64) for a in (t1, t2, t3, t4))
     if not (t1.shape == t2.shape == t3.shape == t4.shape) or t1.ndim != 1 or t1.size == 0:

@@ -439,6 +439,9 @@ def road_plans(world: StaticWorld, duration_s: float = 120.0, rng: np.random.Gen
         raise ConfigError(f"incidents: unknown {sorted(unknown)}; expected 'stop', 'leave', 'slow'")
     if not 0 <= bicycle_fraction <= 1 or rate_veh_per_min < 0:
         raise ConfigError("bicycle_fraction: expected [0, 1]; rate_veh_per_min: expected >= 0")
+    if not 0 <= road < world.roads.shape[0]:
+        raise ConfigError(f"road: expected an index of the world's {world.roads.shape[0]} road(s), got {road}"
+                          + ("; this world has no road (use world.setting = 'road')" if not world.roads.size else ""))
     rng = _rng(rng)
     x0, y0, x1, y1, width = world.roads[road]
     length = float(np.hypot(x1 - x0, y1 - y0))

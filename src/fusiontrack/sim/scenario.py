@@ -48,7 +48,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, validate_call
 
 from ..config import parse_error_message
 from ..errors import ConfigError
@@ -275,9 +275,15 @@ def call_with_params(fn: Callable[..., Any], params: Mapping[str, Any], section:
     unknown = sorted(k for k in params if k not in accepted or k in fixed)
     if unknown:
         options = sorted(k for k in accepted if k not in fixed and k not in ("rng", "world"))
-        raise ConfigError(f"{source}: [{section}] has unknown key(s) {', '.join(unknown)} for "
+        raise ConfigError(f"{source}: {section} has unknown key(s) {', '.join(unknown)} for "
                           f"{fn.__name__}; it takes {', '.join(options)}")
+    # The function's annotations are the schema of its section: pydantic checks (and coerces) the values.
+    checked = validate_call(fn, config=ConfigDict(arbitrary_types_allowed=True))
     try:
-        return fn(**fixed, **params)
-    except (TypeError, ValueError, ConfigError) as err:
-        raise ConfigError(f"{source}: [{section}]: {err}") from err
+        return checked(**fixed, **params)
+    except ValidationError as err:
+        problems = "; ".join(f"{section}.{'.'.join(str(p) for p in e['loc'])}: {e['msg']} (got {e.get('input')!r})"
+                             for e in err.errors())
+        raise ConfigError(f"{source}: {problems}") from err
+    except (TypeError, ValueError, IndexError, ConfigError) as err:
+        raise ConfigError(f"{source}: {section}: {err}") from err

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError
-from ..geometry import matrix_to_quat
+from ..geometry import make_transform, matrix_to_quat, yaw_to_matrix
 from ..io.tracks import write_jsonl
 from ..io.writer import RecordingWriter
 from ..types import Event, GroundTruth, Image, Situation, Transform
@@ -108,11 +108,7 @@ def _pose_transform(t_ns: int, parent: str, child: str, child2parent: np.ndarray
 
 
 def _laser2world(spec: Any) -> np.ndarray:
-    c, s = np.cos(spec.yaw_rad), np.sin(spec.yaw_rad)
-    T = np.eye(4)
-    T[:2, :2] = [[c, -s], [s, c]]
-    T[:3, 3] = [spec.x_m, spec.y_m, spec.height_m]
-    return T
+    return make_transform(yaw_to_matrix(spec.yaw_rad), [spec.x_m, spec.y_m, spec.height_m])
 
 
 @dataclass
@@ -142,13 +138,13 @@ class Simulation:
         src = scenario.source
         world_params = dict(cfg.world)
         setting = world_params.pop("setting", "room")
-        if setting not in WORLD_BUILDERS:
+        if not isinstance(setting, str) or setting not in WORLD_BUILDERS:
             raise ConfigError(f"{src}: world.setting {setting!r} is not one of {', '.join(WORLD_BUILDERS)}")
         self.world = call_with_params(WORLD_BUILDERS[setting], world_params, "world", src,
                                       rng=_rng(seed, "world"))
         agent_params = dict(cfg.agents)
         plan = agent_params.pop("plan", "crossing")
-        if plan not in PLAN_GENERATORS:
+        if not isinstance(plan, str) or plan not in PLAN_GENERATORS:
             raise ConfigError(f"{src}: agents.plan {plan!r} is not one of {', '.join(PLAN_GENERATORS)}")
         peds, vehicles = call_with_params(PLAN_GENERATORS[plan], agent_params, "agents", src, world=self.world,
                                           duration_s=self.duration_s, rng=_rng(seed, "plans"))
@@ -280,8 +276,8 @@ class Simulation:
             writer.write(self._gt_record(snap, "ground_truth", labels))
         for name, items in camera_truth.items():
             for t_ns, stamp_ns, snap, boxes_px, visibility in items:
-                rec = GroundTruth(stamp_ns, "ground_truth/" + name, name, snap.ids, snap.position_m, snap.velocity_mps,
-                                  tuple(KIND_NAMES[k] for k in snap.kinds),
+                rec = GroundTruth(stamp_ns, "ground_truth/" + name, "world", snap.ids, snap.position_m,
+                                  snap.velocity_mps, tuple(KIND_NAMES[k] for k in snap.kinds),
                                   {"box_px": boxes_px, "visibility": visibility,
                                    "t_true_ns": np.full(len(snap), t_ns, np.int64)})
                 writer.write(rec, topic=f"/ground_truth/{name}", log_t_ns=t_ns)
