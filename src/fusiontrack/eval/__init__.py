@@ -1,0 +1,36 @@
+"""Evaluation: tracking metrics computed with TrackEval, and situation-detection accuracy (seed 001 Table II).
+
+* :mod:`.mot` — CLEAR MOT, identity and HOTA metrics on floor-plane distances or image boxes.
+* :mod:`.situations` — true counts, detections and false alarms of merge/split/correlated/appear/disappear.
+"""
+
+from .errors import EvaluationError
+from .mot import (
+    MOT16_DISTRACTOR_CLASSES,
+    MOT20_DISTRACTOR_CLASSES,
+    Metrics,
+    combine_metrics,
+    evaluate_boxes,
+    evaluate_floor,
+    evaluate_mot_files,
+    floor_similarity,
+    metrics_table,
+)
+from .situations import SituationScore, match_events, situation_accuracy, situation_table
+
+__all__ = [
+    "MOT16_DISTRACTOR_CLASSES",
+    "MOT20_DISTRACTOR_CLASSES",
+    "EvaluationError",
+    "Metrics",
+    "SituationScore",
+    "combine_metrics",
+    "evaluate_boxes",
+    "evaluate_floor",
+    "evaluate_mot_files",
+    "floor_similarity",
+    "match_events",
+    "metrics_table",
+    "situation_accuracy",
+    "situation_table",
+]

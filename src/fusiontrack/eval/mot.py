@@ -1,0 +1,644 @@
+"""Multi-object tracking metrics (CLEAR MOT, identity, HOTA) computed with TrackEval's metric classes.
+
+The numbers come from ``trackeval.metrics.CLEAR``, ``Identity``, ``HOTA`` and ``Count`` (TrackEval 1.3.0);
+this module only builds the per-sequence ``data`` dict those classes read, the way TrackEval's
+datasets build it in ``get_preprocessed_seq_data``: per timestep ``gt_ids`` and ``tracker_ids``
+(``(n_gt_t,)`` and ``(n_tr_t,)`` int, relabelled to ``0 .. n_ids - 1`` over the sequence) and
+``similarity_scores`` (``(n_gt_t, n_tr_t)`` float in ``[0, 1]``), plus the counts
+``num_gt_ids``, ``num_tracker_ids``, ``num_gt_dets``, ``num_tracker_dets``, ``num_timesteps``.
+Several sequences are combined with each metric's own ``combine_sequences`` (:func:`combine_metrics`):
+counts are summed and the ratios recomputed from the sums, HOTA's AssA/LocA weighted by HOTA_TP,
+exactly as TrackEval's ``COMBINED_SEQ`` row.
+
+Floor plane (:func:`evaluate_floor`)
+    Similarity from the Euclidean distance ``d`` (m) between a ground-truth position and a track
+    position, with TrackEval's own point formula (``_BaseDataset._calculate_euclidean_similarity``,
+    the MOT15-3D convention) and ``zero_distance = 2 * threshold_m``::
+
+        similarity = max(0, 1 - d / (2 * threshold_m))
+
+    so TrackEval's fixed similarity threshold 0.5 of CLEAR and Identity means exactly
+    ``d <= threshold_m`` (a pair farther than ``threshold_m`` by rounding is pushed just below 0.5,
+    so the rule is exact at the boundary). Consequences:
+
+    * MOTP (and LocA) is ``1 - mean(d) / (2 * threshold_m)`` over the matches:
+      1 for zero distance, 0.5 for matches at the threshold; :attr:`Metrics.motp_m` gives the
+      mean matched distance back in metres. A constant 0.3 m offset at the default 0.5 m gives 0.7.
+    * HOTA averages over ``alpha = 0.05, 0.10, ..., 0.95``; at ``alpha`` a pair can match when
+      ``d <= 2 * threshold_m * (1 - alpha)``, i.e. distance thresholds from ``0.1`` to ``1.9 *
+      threshold_m`` (5 cm to 95 cm for 0.5 m). ``alpha = 0.5`` is the CLEAR/Identity threshold,
+      as IoU 0.5 is for boxes. A track 0.3 m off everywhere matches for ``alpha <= 0.7`` only, so its
+      HOTA is below 1 although MOTA is 1: HOTA scores localisation, MOTA does not.
+
+    Time pairing: every ground-truth frame is one TrackEval timestep. A track state is assigned to
+    the ground-truth frame nearest in time, if within ``time_tolerance_ns`` (default half the median
+    ground-truth period, so a state belongs to at most one frame); when one track has several states
+    in a frame's window, the one nearest in time is used (the earlier on a tie). States farther than
+    the tolerance from every frame (between frames, before the first, after the last) are not
+    evaluated; ground-truth frames with no state are all misses. Positions are used as stamped (not
+    interpolated to the frame time): at 1.5 m/s a 20 ms offset is 3 cm.
+    Objects and tracks are kept when their class is in ``classes`` and then matched class-agnostically
+    (evaluate once per class for per-class numbers). Ids are sorted within each frame, so the order
+    of the input records does not change any result.
+
+Image boxes (:func:`evaluate_boxes`, :func:`evaluate_mot_files`)
+    Similarity = IoU of ``(bb_left, bb_top, bb_width, bb_height)`` boxes, computed by TrackEval's
+    ``_BaseDataset._calculate_box_ious``; a match needs IoU >= 0.5 (as the MOTChallenge devkit and
+    py-motmetrics ``distth=0.5``). Which rows count follows ``MotChallenge2DBox``:
+
+    * ground-truth rows whose 7th column, truncated to an integer, is 0 are dropped (TrackEval's
+      ``zero_marked``: "do not consider");
+    * with ``preprocess`` (MOT16/17/20 ground truth, whose 8th column is the class): per frame, tracker
+      boxes matched (Hungarian on IoU >= 0.5, over ground truth of every class) to a distractor
+      (person on vehicle 2, static person 7, distractor 8, reflection 12; add 6 for MOT20) are
+      removed, then only pedestrian (class 1) ground truth is kept;
+    * without it (MOT15 / 2D MOT 2015 files such as TUD-Campus and TUD-Stadtmitte, whose 8th column
+      is the 3D ``x`` = -1, not a class): no class filtering at all; TrackEval does the same for
+      ``BENCHMARK='MOT15'`` (or ``DO_PREPROC=False``). This is what reproduces the devkit's and
+      py-motmetrics' published TUD values: their ground truth has 1 in column 7 everywhere and the
+      tracker's confidence column (-1) is not used; there are no crowd ignore regions in MOTChallenge.
+
+    ``preprocess=None`` picks it from the ground-truth layout: on for 9-column files (MOT16/17/20),
+    off otherwise.
+
+Compatibility: TrackEval 1.3.0 runs unchanged on numpy 2.x (it no longer uses the removed
+``np.float``/``np.int`` aliases), so no shim is installed. Metric configs are built with
+``PRINT_CONFIG=False``, so nothing is printed; TrackEval is imported on first use (~0.7 s).
+"""
+
+from __future__ import annotations
+
+import configparser
+import logging
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from ..io.tracks import MotBoxes, read_mot
+from ..types import GroundTruth, ObjectClass, Track, TrackState
+from .errors import EvaluationError
+
+if TYPE_CHECKING:
+    from rich.table import Table
+
+__all__ = [
+    "MOT16_DISTRACTOR_CLASSES",
+    "MOT20_DISTRACTOR_CLASSES",
+    "Metrics",
+    "combine_metrics",
+    "evaluate_boxes",
+    "evaluate_floor",
+    "evaluate_mot_files",
+    "floor_similarity",
+    "metrics_table",
+]
+
+logger = logging.getLogger(__name__)
+
+MOT16_DISTRACTOR_CLASSES = (2, 7, 8, 12)
+"""MOT16/17 ground-truth classes whose matched tracker boxes are removed (TrackEval MotChallenge2DBox)."""
+MOT20_DISTRACTOR_CLASSES = (2, 6, 7, 8, 12)
+"""MOT20 adds ``non_mot_vehicle`` (6)."""
+_PEDESTRIAN = 1
+_EPS = float(np.finfo(float).eps)
+_MATCH_SIMILARITY = 0.5  # TrackEval's CLEAR/Identity threshold, also its MOT preprocessing threshold
+_BELOW_MATCH = _MATCH_SIMILARITY - 4 * _EPS  # below CLEAR's ``threshold - eps`` and Identity's ``>= threshold``
+
+
+# --------------------------------------------------------------------------------------------------
+# Result record
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Metrics:
+    """Tracking metrics of one sequence, or of several combined.
+
+    Fractions are in ``[0, 1]`` (MOTA and MODA can be negative); HOTA and its parts are the means over
+    TrackEval's 19 ``alpha`` thresholds (what TrackEval reports as HOTA, DetA, ...). Names follow
+    TrackEval: ``recall`` = CLR_Re (MOTChallenge "Rcll"), ``precision`` = CLR_Pr ("Prcn"), ``motp`` =
+    mean similarity of the CLEAR matches (IoU for boxes; see the module docstring for distances).
+
+    Attributes
+    ----------
+    tp, fp, fn : int
+        CLEAR matches, false positives and misses (detections, summed over frames).
+    id_switches, fragmentations : int
+        CLEAR IDSW and Frag.
+    mostly_tracked, partially_tracked, mostly_lost : int
+        Ground-truth identities tracked for > 80 %, 20-80 %, < 20 % of their frames.
+    idtp, idfp, idfn : int
+        Identity (IDF1) true positives, false positives, false negatives.
+    num_gt_ids, num_tracker_ids, num_gt_dets, num_tracker_dets, num_frames : int
+        What was evaluated (after class filtering and preprocessing).
+    distance_scale_m : float or None
+        Floor-plane mode: the distance at which similarity reaches 0 (``2 * threshold_m``);
+        ``None`` for image boxes.
+    id_map : mapping of int -> int
+        Tracker id -> ground-truth id of the identity (IDF1) correspondence: one-to-one, maximising
+        the number of frames in which the pair is within the match threshold (pairs that never are
+        left out). Original ids, not TrackEval's relabelled ones; empty for combined results.
+    raw : mapping of str -> mapping
+        TrackEval's result dict of each metric class (``"CLEAR"``, ``"Identity"``, ``"HOTA"``,
+        ``"Count"``), kept for :func:`combine_metrics` and for fields not copied here.
+    """
+
+    hota: float
+    deta: float
+    assa: float
+    loca: float
+    detre: float
+    detpr: float
+    assre: float
+    asspr: float
+    mota: float
+    motp: float
+    moda: float
+    idf1: float
+    idp: float
+    idr: float
+    recall: float
+    precision: float
+    tp: int
+    fp: int
+    fn: int
+    id_switches: int
+    fragmentations: int
+    mostly_tracked: int
+    partially_tracked: int
+    mostly_lost: int
+    idtp: int
+    idfp: int
+    idfn: int
+    num_gt_ids: int
+    num_tracker_ids: int
+    num_gt_dets: int
+    num_tracker_dets: int
+    num_frames: int
+    distance_scale_m: float | None = None
+    id_map: Mapping[int, int] = field(default_factory=dict, compare=False)
+    raw: Mapping[str, Mapping[str, Any]] = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def motp_m(self) -> float | None:
+        """Mean distance of the CLEAR matches in metres (floor plane), ``None`` for boxes or without matches."""
+        if self.distance_scale_m is None or self.tp == 0:
+            return None
+        return self.distance_scale_m * (1.0 - self.motp)
+
+    def to_dict(self) -> dict[str, float | int | None]:
+        """The numbers as a flat dict (JSON-ready), plus ``motp_m``; ``id_map`` and ``raw`` are left out."""
+        out: dict[str, float | int | None] = {name: getattr(self, name) for name in _NUMBER_FIELDS}
+        out["motp_m"] = self.motp_m
+        return out
+
+    @classmethod
+    def from_trackeval(cls, raw: Mapping[str, Mapping[str, Any]], *, num_frames: int,
+                       distance_scale_m: float | None = None, id_map: Mapping[int, int] | None = None) -> Metrics:
+        """Build from TrackEval result dicts keyed by metric class name (CLEAR, Identity, HOTA, Count)."""
+        clear, ident, hota, count = raw["CLEAR"], raw["Identity"], raw["HOTA"], raw["Count"]
+
+        def mean(name: str) -> float:
+            return float(np.mean(hota[name]))
+
+        return cls(
+            hota=mean("HOTA"), deta=mean("DetA"), assa=mean("AssA"), loca=mean("LocA"),
+            detre=mean("DetRe"), detpr=mean("DetPr"), assre=mean("AssRe"), asspr=mean("AssPr"),
+            mota=float(clear["MOTA"]), motp=float(clear["MOTP"]), moda=float(clear["MODA"]),
+            idf1=float(ident["IDF1"]), idp=float(ident["IDP"]), idr=float(ident["IDR"]),
+            recall=float(clear["CLR_Re"]), precision=float(clear["CLR_Pr"]),
+            tp=int(clear["CLR_TP"]), fp=int(clear["CLR_FP"]), fn=int(clear["CLR_FN"]),
+            id_switches=int(clear["IDSW"]), fragmentations=int(clear["Frag"]),
+            mostly_tracked=int(clear["MT"]), partially_tracked=int(clear["PT"]), mostly_lost=int(clear["ML"]),
+            idtp=int(ident["IDTP"]), idfp=int(ident["IDFP"]), idfn=int(ident["IDFN"]),
+            num_gt_ids=int(count["GT_IDs"]), num_tracker_ids=int(count["IDs"]),
+            num_gt_dets=int(count["GT_Dets"]), num_tracker_dets=int(count["Dets"]), num_frames=int(num_frames),
+            distance_scale_m=distance_scale_m, id_map=MappingProxyType(dict(id_map or {})),
+            raw=MappingProxyType({k: MappingProxyType(dict(v)) for k, v in raw.items()}),
+        )
+
+
+_NUMBER_FIELDS = tuple(name for name in Metrics.__dataclass_fields__ if name not in ("id_map", "raw"))
+
+
+# --------------------------------------------------------------------------------------------------
+# TrackEval core
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class _Sequence:
+    """Per-timestep inputs in original ids: ``gt_ids[t]`` (n_gt_t,), ``tracker_ids[t]`` (n_tr_t,),
+    ``similarity[t]`` (n_gt_t, n_tr_t)."""
+
+    name: str
+    gt_ids: list[np.ndarray]
+    tracker_ids: list[np.ndarray]
+    similarity: list[np.ndarray]
+
+
+def _trackeval_metrics(threshold: float) -> list[Any]:
+    import trackeval  # heavy (~0.7 s): imported when first needed
+
+    quiet = {"THRESHOLD": float(threshold), "PRINT_CONFIG": False}
+    return [trackeval.metrics.HOTA(), trackeval.metrics.CLEAR(dict(quiet)), trackeval.metrics.Identity(dict(quiet)),
+            trackeval.metrics.Count()]
+
+
+def _relabel(ids_per_t: list[np.ndarray], seq: str, what: str) -> tuple[list[np.ndarray], np.ndarray]:
+    """Contiguous 0-based ids over the sequence; check each id appears once per timestep."""
+    if not ids_per_t:
+        return [], np.zeros(0, np.int64)
+    lengths = np.array([ids.size for ids in ids_per_t], dtype=np.int64)
+    flat = np.concatenate(ids_per_t).astype(np.int64)
+    unique, inverse = np.unique(flat, return_inverse=True)
+    t_of = np.repeat(np.arange(lengths.size), lengths)
+    key = t_of * max(unique.size, 1) + inverse
+    keys, counts = np.unique(key, return_counts=True)
+    if np.any(counts > 1):
+        k = int(keys[np.argmax(counts > 1)])
+        t, i = divmod(k, max(unique.size, 1))
+        raise EvaluationError(f"{seq}: {what} id {int(unique[i])} appears more than once in timestep {t} "
+                              f"(frame {t + 1})")
+    return np.split(inverse.astype(np.int64), np.cumsum(lengths)[:-1]), unique
+
+
+def _identity_map(gt: list[np.ndarray], tr: list[np.ndarray], sim: list[np.ndarray], gt_unique: np.ndarray,
+                  tr_unique: np.ndarray, threshold: float) -> dict[int, int]:
+    """One-to-one tracker -> gt map (original ids) maximising co-matched frames: Identity's assignment,
+    whose cost is ``sum(gt dets) + sum(tracker dets) - 2 * sum(matched frames)``."""
+    n_gt, n_tr = gt_unique.size, tr_unique.size
+    if n_gt == 0 or n_tr == 0:
+        return {}
+    pairs = [g[r] * n_tr + t[c] for g, t, s in zip(gt, tr, sim, strict=True)
+             for r, c in [np.nonzero(s >= threshold)]]
+    flat = np.concatenate(pairs) if pairs else np.zeros(0, np.int64)
+    counts = np.bincount(flat, minlength=n_gt * n_tr).reshape(n_gt, n_tr)
+    rows, cols = linear_sum_assignment(-counts)
+    keep = counts[rows, cols] > 0
+    return {int(tr_unique[c]): int(gt_unique[r]) for r, c in zip(rows[keep], cols[keep], strict=True)}
+
+
+def _evaluate(seq: _Sequence, threshold: float = _MATCH_SIMILARITY, distance_scale_m: float | None = None) -> Metrics:
+    gt, gt_unique = _relabel(seq.gt_ids, seq.name, "ground-truth")
+    tr, tr_unique = _relabel(seq.tracker_ids, seq.name, "tracker")
+    sim = [np.asarray(s, dtype=np.float64).reshape(g.size, t.size) for g, t, s in zip(gt, tr, seq.similarity,
+                                                                                       strict=True)]
+    data = {
+        "gt_ids": gt, "tracker_ids": tr, "similarity_scores": sim,
+        "num_timesteps": len(gt), "num_gt_ids": int(gt_unique.size), "num_tracker_ids": int(tr_unique.size),
+        "num_gt_dets": int(sum(g.size for g in gt)), "num_tracker_dets": int(sum(t.size for t in tr)),
+        "seq": seq.name,
+    }
+    # Call the undecorated eval_sequence: TrackEval's timing wrapper prints once any Evaluator has switched
+    # its global timing flag on (the Evaluator's default).
+    raw = {type(m).__name__: getattr(type(m).eval_sequence, "__wrapped__", type(m).eval_sequence)(m, data)
+           for m in _trackeval_metrics(threshold)}
+    id_map = _identity_map(gt, tr, sim, gt_unique, tr_unique, threshold)
+    return Metrics.from_trackeval(raw, num_frames=len(gt), distance_scale_m=distance_scale_m, id_map=id_map)
+
+
+def combine_metrics(results: Iterable[Metrics] | Mapping[str, Metrics]) -> Metrics:
+    """Combine several sequences as TrackEval's ``COMBINED_SEQ`` does (each metric's ``combine_sequences``).
+
+    Parameters
+    ----------
+    results : iterable of Metrics, or mapping name -> Metrics
+        Per-sequence results from this module (they carry TrackEval's raw dicts).
+
+    Returns
+    -------
+    Metrics
+        Counts summed; MOTA, IDF1, ... recomputed from the sums; HOTA's AssA and LocA weighted by
+        HOTA_TP. ``id_map`` is empty; ``distance_scale_m`` is kept when all agree.
+    """
+    items = list(results.values()) if isinstance(results, Mapping) else list(results)
+    if not items:
+        raise EvaluationError("results: expected at least one Metrics to combine")
+    if any(not m.raw for m in items):
+        raise EvaluationError("results: every Metrics must come from this module's evaluate_* (raw TrackEval dicts)")
+    metrics = _trackeval_metrics(_MATCH_SIMILARITY)
+    raw = {type(m).__name__: m.combine_sequences({i: dict(r.raw[type(m).__name__]) for i, r in enumerate(items)})
+           for m in metrics}
+    scales = {m.distance_scale_m for m in items}
+    return Metrics.from_trackeval(raw, num_frames=sum(m.num_frames for m in items),
+                                  distance_scale_m=scales.pop() if len(scales) == 1 else None)
+
+
+# --------------------------------------------------------------------------------------------------
+# Floor plane
+# --------------------------------------------------------------------------------------------------
+
+
+def floor_similarity(gt_xy_m: np.ndarray, track_xy_m: np.ndarray, threshold_m: float) -> np.ndarray:
+    """TrackEval similarity of floor positions: ``max(0, 1 - d / (2 threshold_m))``, < 0.5 iff ``d > threshold_m``.
+
+    Parameters
+    ----------
+    gt_xy_m : (n, 2) float
+    track_xy_m : (m, 2) float
+    threshold_m : float
+        Match distance, m.
+
+    Returns
+    -------
+    (n, m) float64
+    """
+    a = np.asarray(gt_xy_m, dtype=np.float64).reshape(-1, 2)
+    b = np.asarray(track_xy_m, dtype=np.float64).reshape(-1, 2)
+    d = np.linalg.norm(a[:, None, :] - b[None, :, :], axis=2)
+    sim = np.maximum(0.0, 1.0 - d / (2.0 * threshold_m))  # TrackEval's formula, zero_distance = 2 threshold
+    return np.where(d > threshold_m, np.minimum(sim, _BELOW_MATCH), sim)
+
+
+def _class_filter(classes: Iterable[str] | None) -> frozenset[str] | None:
+    if classes is None:
+        return None
+    if isinstance(classes, str):
+        classes = (classes,)
+    try:
+        return frozenset(str(ObjectClass(c)) for c in classes)
+    except ValueError as err:
+        raise EvaluationError(f"classes: expected values of {[c.value for c in ObjectClass]}, got "
+                              f"{tuple(classes)!r}") from err
+
+
+def _flatten_states(tracks: Iterable[TrackState | Track]) -> list[TrackState]:
+    states: list[TrackState] = []
+    for item in tracks:
+        if isinstance(item, Track):
+            states.extend(item.states)
+        elif isinstance(item, TrackState):
+            states.append(item)
+        else:
+            raise EvaluationError(f"tracks: expected TrackState or Track records, got {type(item).__name__}")
+    return states
+
+
+def _floor_sequence(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Track], threshold_m: float,
+                    classes: frozenset[str] | None, time_tolerance_ns: int | None, name: str) -> _Sequence:
+    frames = sorted(gt, key=lambda f: f.t_ns)
+    if not frames:
+        raise EvaluationError("gt: expected at least one GroundTruth frame")
+    gt_t = np.array([f.t_ns for f in frames], dtype=np.int64)
+    if np.any(np.diff(gt_t) == 0):
+        t_dup = int(gt_t[1:][np.diff(gt_t) == 0][0])
+        raise EvaluationError(f"gt: two GroundTruth frames at t_ns={t_dup}")
+    if time_tolerance_ns is None:
+        time_tolerance_ns = int(np.median(np.diff(gt_t))) // 2 if gt_t.size > 1 else 0
+    elif isinstance(time_tolerance_ns, bool) or not isinstance(time_tolerance_ns, int | np.integer) \
+            or time_tolerance_ns < 0:
+        raise EvaluationError(f"time_tolerance_ns: expected an integer >= 0 or None, got {time_tolerance_ns!r}")
+    n_t = gt_t.size
+
+    # ground truth, per frame, sorted by id
+    gt_ids, gt_pos = [], []
+    for f in frames:
+        keep = np.ones(len(f), bool) if classes is None else np.isin(np.array(f.classes, dtype=object),
+                                                                     list(classes))
+        order = np.argsort(f.ids[keep], kind="stable")
+        gt_ids.append(f.ids[keep][order])
+        gt_pos.append(f.positions_m[keep][order])
+
+    # track states -> nearest ground-truth frame within the tolerance, one state per (frame, track)
+    states = [s for s in _flatten_states(tracks) if classes is None or s.cls in classes]
+    st_t = np.array([s.t_ns for s in states], dtype=np.int64)
+    st_id = np.array([s.track_id for s in states], dtype=np.int64)
+    st_xy = np.array([s.position_m for s in states], dtype=np.float64).reshape(-1, 2)
+    if st_t.size:
+        pair = np.unique(np.stack([st_t, st_id], axis=1), axis=0, return_counts=True)
+        if np.any(pair[1] > 1):
+            t_dup, id_dup = pair[0][np.argmax(pair[1] > 1)].tolist()
+            raise EvaluationError(f"tracks: two states of track {id_dup} at t_ns={t_dup}")
+    after = np.searchsorted(gt_t, st_t)
+    lo, hi = np.clip(after - 1, 0, n_t - 1), np.clip(after, 0, n_t - 1)
+    dt_lo, dt_hi = np.abs(st_t - gt_t[lo]), np.abs(gt_t[hi] - st_t)
+    frame = np.where(dt_hi < dt_lo, hi, lo)
+    dt = np.minimum(dt_lo, dt_hi)
+    inside = dt <= time_tolerance_ns
+    frame, dt, st_t, st_id, st_xy = frame[inside], dt[inside], st_t[inside], st_id[inside], st_xy[inside]
+    order = np.lexsort((st_t, dt, st_id, frame))  # by frame, id, then nearest (earlier on a tie)
+    frame, st_id, st_xy = frame[order], st_id[order], st_xy[order]
+    first = np.ones(frame.size, bool)
+    first[1:] = (frame[1:] != frame[:-1]) | (st_id[1:] != st_id[:-1])
+    frame, st_id, st_xy = frame[first], st_id[first], st_xy[first]
+    n_dropped = int(inside.size - inside.sum())
+    if n_dropped:
+        logger.debug("%s: %d track states farther than %d ns from every ground-truth frame are not evaluated",
+                     name, n_dropped, time_tolerance_ns)
+
+    bounds = np.searchsorted(frame, np.arange(n_t + 1))
+    tr_ids = [st_id[bounds[k]:bounds[k + 1]] for k in range(n_t)]
+    sims = [floor_similarity(gt_pos[k], st_xy[bounds[k]:bounds[k + 1]], threshold_m) for k in range(n_t)]
+    return _Sequence(name, gt_ids, tr_ids, sims)
+
+
+def evaluate_floor(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Track], threshold_m: float = 0.5,
+                   classes: Iterable[str] | None = ("person",), time_tolerance_ns: int | None = None,
+                   *, name: str = "floor") -> Metrics:
+    """Metrics of floor-plane tracks against ground-truth frames (see the module docstring for the mapping).
+
+    Parameters
+    ----------
+    gt : sequence of GroundTruth
+        One frame per instant (any order; times must differ). Each frame is one timestep.
+    tracks : iterable of TrackState or Track
+        Tracker output in the ground truth's frame (``position_m``), any order.
+    threshold_m : float
+        Match distance, m: a track matches an object when within ``threshold_m`` (similarity >= 0.5).
+    classes : iterable of str or None
+        Object classes kept, in the ground truth and in the tracks (``TrackState.cls``); ``None`` = all.
+    time_tolerance_ns : int or None
+        Largest time offset between a track state and the frame it is scored in; ``None`` = half the
+        median ground-truth period (0 for a single frame).
+    name : str
+        Sequence name used in error messages.
+
+    Returns
+    -------
+    Metrics
+        With ``distance_scale_m = 2 * threshold_m`` and ``id_map`` from track id to ground-truth id.
+
+    Raises
+    ------
+    EvaluationError
+        Bad threshold or tolerance, no frames, two frames at one time, two states of one track at one time.
+    """
+    if not (isinstance(threshold_m, int | float | np.floating) and np.isfinite(threshold_m) and threshold_m > 0):
+        raise EvaluationError(f"threshold_m: expected a finite distance > 0 m, got {threshold_m!r}")
+    seq = _floor_sequence(gt, tracks, float(threshold_m), _class_filter(classes), time_tolerance_ns, name)
+    return _evaluate(seq, _MATCH_SIMILARITY, distance_scale_m=2.0 * float(threshold_m))
+
+
+# --------------------------------------------------------------------------------------------------
+# Image boxes (MOTChallenge)
+# --------------------------------------------------------------------------------------------------
+
+
+def _box_ious(gt_ltwh: np.ndarray, res_ltwh: np.ndarray) -> np.ndarray:
+    """IoU ``(n, m)`` of ``(n, 4)`` and ``(m, 4)`` ltwh boxes, by TrackEval's own function."""
+    if gt_ltwh.shape[0] == 0 or res_ltwh.shape[0] == 0:
+        return np.zeros((gt_ltwh.shape[0], res_ltwh.shape[0]))
+    from trackeval.datasets._base_dataset import _BaseDataset
+
+    return _BaseDataset._calculate_box_ious(gt_ltwh, res_ltwh, box_format="xywh")
+
+
+def _frame_slices(frame: np.ndarray, n_frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """Row order (stable by frame, file order within a frame) and slice bounds of frames 1..n_frames."""
+    order = np.argsort(frame, kind="stable")
+    return order, np.searchsorted(frame[order], np.arange(1, n_frames + 2))
+
+
+def _box_sequence(gt: MotBoxes, res: MotBoxes, preprocess: bool, distractor_classes: Sequence[int],
+                  n_frames: int, name: str) -> _Sequence:
+    # TrackEval reads column 7 of gt with ``astype(int)`` as "zero_marked" (consider flag)
+    considered = gt.conf.astype(np.int64) != 0
+    gt_class = gt.extra[:, 0].astype(np.int64) if preprocess else np.full(len(gt), _PEDESTRIAN)
+    distractors = np.asarray(distractor_classes, dtype=np.int64)
+    g_order, g_bounds = _frame_slices(gt.frame, n_frames)
+    r_order, r_bounds = _frame_slices(res.frame, n_frames)
+    gt_ids, tr_ids, sims = [], [], []
+    for k in range(n_frames):
+        g = g_order[g_bounds[k]:g_bounds[k + 1]]
+        r = r_order[r_bounds[k]:r_bounds[k + 1]]
+        iou = _box_ious(gt.boxes_ltwh[g], res.boxes_ltwh[r])
+        keep_r = np.ones(r.size, bool)
+        if preprocess and g.size and r.size:
+            # MotChallenge2DBox step 2: drop tracker boxes matched to a distractor (IoU >= 0.5, any gt class)
+            scores = np.where(iou < _MATCH_SIMILARITY - _EPS, 0.0, iou)
+            rows, cols = linear_sum_assignment(-scores)
+            matched = scores[rows, cols] > _EPS
+            rows, cols = rows[matched], cols[matched]
+            keep_r[cols[np.isin(gt_class[g][rows], distractors)]] = False
+        keep_g = considered[g] & (gt_class[g] == _PEDESTRIAN) if preprocess else considered[g]
+        gt_ids.append(gt.id[g][keep_g])
+        tr_ids.append(res.id[r][keep_r])
+        sims.append(iou[np.ix_(keep_g, keep_r)])
+    return _Sequence(name, gt_ids, tr_ids, sims)
+
+
+def evaluate_boxes(gt: MotBoxes, res: MotBoxes, *, preprocess: bool | None = None, iou_threshold: float = 0.5,
+                   n_frames: int | None = None, distractor_classes: Sequence[int] = MOT16_DISTRACTOR_CLASSES,
+                   name: str = "boxes") -> Metrics:
+    """Metrics of image boxes (MOTChallenge rows) with IoU similarity.
+
+    Parameters
+    ----------
+    gt, res : MotBoxes
+        Ground truth and tracker output (:func:`fusiontrack.io.tracks.read_mot`); frames are 1-based.
+    preprocess : bool or None
+        MOT16/17/20 preprocessing (distractor removal, pedestrians only; see the module docstring);
+        ``None`` = on when the ground truth has the 9-column MOT16/17/20 layout.
+    iou_threshold : float
+        CLEAR and Identity match threshold on IoU (0.5 in every benchmark); HOTA always sweeps alpha
+        and preprocessing always uses 0.5, as in TrackEval.
+    n_frames : int or None
+        Sequence length (``seqLength``); ``None`` = the last frame in either file. Only
+        ``FP_per_frame`` and :attr:`Metrics.num_frames` depend on it.
+    distractor_classes : sequence of int
+        Ground-truth classes whose matched tracker boxes are removed when preprocessing
+        (:data:`MOT20_DISTRACTOR_CLASSES` for MOT20).
+    name : str
+        Sequence name used in error messages.
+
+    Raises
+    ------
+    EvaluationError
+        A frame outside ``1 .. n_frames``, an id twice in one frame, a bad threshold, or ``preprocess``
+        asked of ground truth without a class column.
+    """
+    if not (isinstance(iou_threshold, int | float | np.floating) and 0 < iou_threshold <= 1):
+        raise EvaluationError(f"iou_threshold: expected a value in (0, 1], got {iou_threshold!r}")
+    if preprocess is None:
+        preprocess = gt.extra.shape[1] == 2  # MOT16/17/20 gt: consider, class, visibility
+    if preprocess and gt.extra.shape[1] < 1:
+        raise EvaluationError(f"{name}: preprocess needs the ground-truth class column (the 8th), which the "
+                              "ground truth lacks")
+    last = int(max(gt.frame.max(initial=0), res.frame.max(initial=0)))
+    if n_frames is None:
+        n_frames = last
+    elif not isinstance(n_frames, int | np.integer) or n_frames < last:
+        raise EvaluationError(f"n_frames: expected an integer >= {last} (the last frame in the files), "
+                              f"got {n_frames!r}")
+    first = int(min(gt.frame.min(initial=1), res.frame.min(initial=1)))
+    if first < 1:
+        raise EvaluationError(f"{name}: frames are 1-based, found frame {first}")
+    seq = _box_sequence(gt, res, bool(preprocess), distractor_classes, int(n_frames), name)
+    return _evaluate(seq, float(iou_threshold))
+
+
+def _seq_length(gt_path: Path) -> int | None:
+    for ini in (gt_path.parent.parent / "seqinfo.ini", gt_path.parent / "seqinfo.ini"):
+        if ini.is_file():
+            parser = configparser.ConfigParser()
+            try:
+                parser.read(ini, encoding="utf-8")
+                return int(parser["Sequence"]["seqLength"])
+            except (configparser.Error, KeyError, ValueError) as err:
+                raise EvaluationError(f"{ini}: expected [Sequence] seqLength=<int> ({err})") from err
+    return None
+
+
+def evaluate_mot_files(gt_path: str | Path, res_path: str | Path, *, preprocess: bool | None = None,
+                       iou_threshold: float = 0.5, n_frames: int | None = None,
+                       distractor_classes: Sequence[int] = MOT16_DISTRACTOR_CLASSES) -> Metrics:
+    """Metrics of a MOTChallenge result file against its ground truth (see :func:`evaluate_boxes`).
+
+    ``n_frames=None`` reads ``seqLength`` from ``seqinfo.ini`` beside the ground truth's ``gt/`` folder
+    (MOTChallenge layout ``SEQ/gt/gt.txt`` + ``SEQ/seqinfo.ini``) or beside ``gt.txt``, else uses the
+    last frame in the files.
+
+    Raises
+    ------
+    RecordingError
+        A file is missing or malformed (file and line named).
+    EvaluationError
+        As :func:`evaluate_boxes`, or a malformed ``seqinfo.ini``.
+    """
+    gt_path, res_path = Path(gt_path), Path(res_path)
+    gt, res = read_mot(gt_path), read_mot(res_path)
+    if n_frames is None:
+        n_frames = _seq_length(gt_path)
+    return evaluate_boxes(gt, res, preprocess=preprocess, iou_threshold=iou_threshold, n_frames=n_frames,
+                          distractor_classes=distractor_classes, name=str(res_path))
+
+
+# --------------------------------------------------------------------------------------------------
+# Presentation
+# --------------------------------------------------------------------------------------------------
+
+_TABLE_COLUMNS = (  # (header, field, is a fraction shown in percent)
+    ("HOTA", "hota", True), ("DetA", "deta", True), ("AssA", "assa", True), ("LocA", "loca", True),
+    ("MOTA", "mota", True), ("MOTP", "motp", True), ("IDF1", "idf1", True), ("IDP", "idp", True),
+    ("IDR", "idr", True), ("Rcll", "recall", True), ("Prcn", "precision", True), ("IDSW", "id_switches", False),
+    ("Frag", "fragmentations", False), ("FP", "fp", False), ("FN", "fn", False), ("GT", "num_gt_ids", False),
+    ("MT", "mostly_tracked", False), ("PT", "partially_tracked", False), ("ML", "mostly_lost", False),
+)
+
+
+def metrics_table(results: Mapping[str, Metrics], *, title: str | None = None) -> Table:
+    """A rich table, one row per entry of ``results``, fractions in percent with one decimal (MOTChallenge style).
+
+    Floor-plane results (all with a distance scale) get a ``MOTP m`` column: the mean matched distance.
+    """
+    from rich.table import Table
+
+    table = Table(title=title)
+    table.add_column("sequence", style="bold")
+    floor = bool(results) and all(m.distance_scale_m is not None for m in results.values())
+    for header, _, _ in _TABLE_COLUMNS:
+        table.add_column(header, justify="right")
+    if floor:
+        table.add_column("MOTP m", justify="right")
+    for seq_name, m in results.items():
+        cells = [f"{100 * getattr(m, f):.1f}" if pct else str(getattr(m, f)) for _, f, pct in _TABLE_COLUMNS]
+        if floor:
+            cells.append("-" if m.motp_m is None else f"{m.motp_m:.3f}")
+        table.add_row(str(seq_name), *cells)
+    return table

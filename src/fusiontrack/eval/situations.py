@@ -1,0 +1,224 @@
+"""Situation-detection accuracy: the tracker's situation events against the true ones (seed 001, Table II).
+
+True events come from :func:`fusiontrack.sim.situations.situation_events` (kinds ``merge``, ``split``,
+``correlated``, ``appear``, ``disappear``); detected events are the tracker's
+:class:`~fusiontrack.types.Event` records of the same kinds. Per kind, detections are matched one-to-one
+to true events (:func:`match_events`), and :func:`situation_accuracy` reports the true count, the
+true events detected (true positives), the false alarms (detections matched to nothing), recall
+and precision.
+
+A detection ``d`` may match a true event ``e`` when all of these hold:
+
+* same ``kind``;
+* time: the gap between their time spans ``[t_ns, t_end_ns]`` is at most ``time_tolerance_ns``
+  (default 1 s). For instants (merge, split: ``t_end_ns == t_ns``) this is ``|t_d - t_e| <= 1 s``;
+  a detection inside a true correlated episode, or a tracker's appear/disappear anywhere in the true
+  event's window (``appear``: entry .. entry + 1 s; ``disappear``: up to 1 s before the exit .. exit),
+  matches. ``t_end_ns = None`` (still going on) extends to the end of time;
+* identities, when ``id_map`` (tracker id -> ground-truth id) is given: the detection's ids mapped to
+  ground-truth ids share at least one with the true event's ``track_ids`` (a detection none of whose
+  ids maps to anything cannot match). Use :attr:`fusiontrack.eval.mot.Metrics.id_map` from
+  :func:`~fusiontrack.eval.mot.evaluate_floor` on the same run, or ``{i: i for i in ...}`` when the
+  detector reports ground-truth ids;
+* position, only without ``id_map`` and only when both events have ``position_m``: within
+  ``position_tolerance_m`` (default 1 m); otherwise time alone decides.
+
+Among the allowed pairs the matching maximises the number of matches, then minimises the summed
+start-time offsets (Hungarian algorithm), so the counts do not depend on the order of the inputs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from ..sim.situations import EVENT_KINDS
+from ..types import Event
+from .errors import EvaluationError
+
+if TYPE_CHECKING:
+    from rich.table import Table
+
+__all__ = ["SituationScore", "match_events", "situation_accuracy", "situation_table"]
+
+_FOREVER = 2**62  # "still going on"; far from int64 overflow when differences are taken
+
+
+@dataclass(frozen=True, slots=True)
+class SituationScore:
+    """Detection accuracy of one kind of situation event.
+
+    Attributes
+    ----------
+    kind : str
+    true : int
+        Number of true events.
+    detected : int
+        True events matched by a detection (true positives).
+    false_alarms : int
+        Detections matched to no true event.
+    detections : int
+        Number of detections (``detected + false_alarms``).
+    """
+
+    kind: str
+    true: int
+    detected: int
+    false_alarms: int
+    detections: int
+
+    @property
+    def recall(self) -> float:
+        """``detected / true``; ``NaN`` when there is no true event."""
+        return self.detected / self.true if self.true else float("nan")
+
+    @property
+    def precision(self) -> float:
+        """``detected / detections``; ``NaN`` when there is no detection."""
+        return self.detected / self.detections if self.detections else float("nan")
+
+    def to_dict(self) -> dict[str, str | int | float]:
+        return {"kind": self.kind, "true": self.true, "detected": self.detected, "false_alarms": self.false_alarms,
+                "detections": self.detections, "recall": self.recall, "precision": self.precision}
+
+
+def _check_options(time_tolerance_ns: int, position_tolerance_m: float) -> None:
+    if isinstance(time_tolerance_ns, bool) or not isinstance(time_tolerance_ns, int | np.integer) \
+            or time_tolerance_ns < 0:
+        raise EvaluationError(f"time_tolerance_ns: expected an integer >= 0, got {time_tolerance_ns!r}")
+    if not position_tolerance_m >= 0:
+        raise EvaluationError(f"position_tolerance_m: expected a distance >= 0 m, got {position_tolerance_m!r}")
+
+
+def _spans(events: Sequence[Event]) -> tuple[np.ndarray, np.ndarray]:
+    start = np.array([e.t_ns for e in events], dtype=np.int64)
+    end = np.array([_FOREVER if e.t_end_ns is None else e.t_end_ns for e in events], dtype=np.int64)
+    return start, end
+
+
+def _positions(events: Sequence[Event]) -> np.ndarray:
+    return np.array([(np.nan, np.nan) if e.position_m is None else e.position_m for e in events],
+                    dtype=np.float64).reshape(-1, 2)
+
+
+def _incidence(id_lists: Sequence[Sequence[int]], universe: np.ndarray) -> np.ndarray:
+    """``(n_events, n_ids)`` int: 1 where the event names the id."""
+    lengths = np.array([len(ids) for ids in id_lists], dtype=np.int64)
+    flat = np.fromiter((i for ids in id_lists for i in ids), dtype=np.int64, count=int(lengths.sum()))
+    out = np.zeros((len(id_lists), universe.size), dtype=np.int64)
+    out[np.repeat(np.arange(len(id_lists)), lengths), np.searchsorted(universe, flat)] = 1
+    return out
+
+
+def _allowed(true: Sequence[Event], det: Sequence[Event], time_tolerance_ns: int, id_map: Mapping[int, int] | None,
+             position_tolerance_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(n_true, n_det)`` bool of allowed pairs and ``(n_true, n_det)`` start-time offsets in ns (int64)."""
+    t_start, t_end = _spans(true)
+    d_start, d_end = _spans(det)
+    # gap between the spans [t_start, t_end] and [d_start, d_end] (0 when they overlap)
+    gap = np.maximum(np.maximum(t_start[:, None] - d_end[None, :], d_start[None, :] - t_end[:, None]), 0)
+    ok = gap <= time_tolerance_ns
+    offset = np.abs(t_start[:, None] - d_start[None, :])
+    if id_map is not None:
+        true_ids = [e.track_ids for e in true]
+        det_ids = [tuple(id_map[i] for i in e.track_ids if i in id_map) for e in det]
+        universe = np.unique(np.fromiter((i for ids in (*true_ids, *det_ids) for i in ids), dtype=np.int64))
+        ok &= (_incidence(true_ids, universe) @ _incidence(det_ids, universe).T) > 0
+    else:
+        diff = _positions(true)[:, None, :] - _positions(det)[None, :, :]
+        ok &= ~(np.linalg.norm(diff, axis=2) > position_tolerance_m)  # NaN (no position) passes
+    return ok, offset
+
+
+def match_events(true_events: Sequence[Event], detected_events: Sequence[Event], *,
+                 time_tolerance_ns: int = 1_000_000_000, id_map: Mapping[int, int] | None = None,
+                 position_tolerance_m: float = 1.0) -> list[tuple[int, int]]:
+    """One-to-one matches between true and detected events of the same kind (rules in the module docstring).
+
+    Parameters
+    ----------
+    true_events, detected_events : sequence of Event
+    time_tolerance_ns : int
+        Largest gap between the two events' time spans, ns.
+    id_map : mapping of int -> int, optional
+        Tracker id -> ground-truth id; when given, matched events must share an identity.
+    position_tolerance_m : float
+        Largest distance between the events' positions (without ``id_map``, when both have one), m.
+
+    Returns
+    -------
+    list of (int, int)
+        ``(index into true_events, index into detected_events)``, sorted.
+    """
+    _check_options(time_tolerance_ns, position_tolerance_m)
+    true_events, detected_events = list(true_events), list(detected_events)
+    pairs: list[tuple[int, int]] = []
+    for kind in sorted({e.kind for e in true_events} & {e.kind for e in detected_events}):
+        ti = [i for i, e in enumerate(true_events) if e.kind == kind]
+        di = [i for i, e in enumerate(detected_events) if e.kind == kind]
+        ok, offset = _allowed([true_events[i] for i in ti], [detected_events[i] for i in di], time_tolerance_ns,
+                              id_map, position_tolerance_m)
+        # Every allowed pair is worth more than any sum of tie-breaks: maximum matches first, then the
+        # smallest summed start offsets (each normalised into [0, 1)).
+        worth = min(len(ti), len(di)) + 2
+        cost = np.where(ok, offset / (offset.max(initial=0) + 1.0) - worth, 0.0)
+        rows, cols = linear_sum_assignment(cost)
+        keep = ok[rows, cols]
+        pairs.extend((ti[r], di[c]) for r, c in zip(rows[keep], cols[keep], strict=True))
+    return sorted(pairs)
+
+
+def situation_accuracy(true_events: Iterable[Event], detected_events: Iterable[Event], *,
+                       kinds: Sequence[str] = EVENT_KINDS, time_tolerance_ns: int = 1_000_000_000,
+                       id_map: Mapping[int, int] | None = None,
+                       position_tolerance_m: float = 1.0) -> dict[str, SituationScore]:
+    """Per kind of situation: true count, detected, false alarms (seed 001 Table II).
+
+    Parameters
+    ----------
+    true_events : iterable of Event
+        From :func:`fusiontrack.sim.situations.situation_events`.
+    detected_events : iterable of Event
+        The tracker's situation events; kinds not in ``kinds`` are ignored.
+    kinds : sequence of str
+        The kinds scored (every one gets an entry, also when it has no events).
+    time_tolerance_ns, id_map, position_tolerance_m
+        As :func:`match_events`.
+
+    Returns
+    -------
+    dict of str -> SituationScore
+        In the order of ``kinds``.
+    """
+    wanted = tuple(kinds)
+    true = [e for e in true_events if e.kind in wanted]
+    det = [e for e in detected_events if e.kind in wanted]
+    pairs = match_events(true, det, time_tolerance_ns=time_tolerance_ns, id_map=id_map,
+                         position_tolerance_m=position_tolerance_m)
+    kind_true = np.array([e.kind for e in true], dtype=object)
+    kind_det = np.array([e.kind for e in det], dtype=object)
+    kind_pair = np.array([true[i].kind for i, _ in pairs], dtype=object)
+    scores = {}
+    for kind in wanted:
+        n_true, n_det, n_hit = (int(np.count_nonzero(k == kind)) for k in (kind_true, kind_det, kind_pair))
+        scores[kind] = SituationScore(kind=kind, true=n_true, detected=n_hit, false_alarms=n_det - n_hit,
+                                      detections=n_det)
+    return scores
+
+
+def situation_table(scores: Mapping[str, SituationScore], *, title: str | None = None) -> Table:
+    """A rich table of :func:`situation_accuracy`'s result: one row per kind, recall and precision in percent."""
+    from rich.table import Table
+
+    table = Table(title=title)
+    for header in ("situation", "true", "detected", "false alarms", "recall %", "precision %"):
+        table.add_column(header, justify="left" if header == "situation" else "right")
+    for kind, s in scores.items():
+        table.add_row(kind, str(s.true), str(s.detected), str(s.false_alarms),
+                      "-" if np.isnan(s.recall) else f"{100 * s.recall:.1f}",
+                      "-" if np.isnan(s.precision) else f"{100 * s.precision:.1f}")
+    return table

@@ -1,0 +1,191 @@
+"""Situation-detection accuracy (eval/situations.py; seed 001 Table II) on hand-built event lists.
+
+Every expected count is worked out by hand from the listed times, ids and positions.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fusiontrack.eval import (
+    EvaluationError,
+    evaluate_floor,
+    match_events,
+    situation_accuracy,
+    situation_table,
+)
+from fusiontrack.sim.situations import EVENT_KINDS, situation_events
+from fusiontrack.types import Event, GroundTruth, TrackState
+
+S = 1_000_000_000  # ns per second
+T0 = 1_700_000_000 * S
+
+
+def ev(kind: str, t_s: float, ids=(), t_end_s: float | None = None, pos=None, sensor: str = "tracker") -> Event:
+    t_end = None if t_end_s is None else T0 + round(t_end_s * S)
+    return Event(t_ns=T0 + round(t_s * S), sensor=sensor, kind=kind, t_end_ns=t_end, position_m=pos,
+                 track_ids=tuple(ids))
+
+
+TRUE = [  # ground-truth ids 1..5
+    ev("appear", 5.0, (4,), 6.0, pos=(0.2, 3.0), sensor="ground_truth"),
+    ev("merge", 10.0, (1, 2), 10.0, pos=(2.0, 2.0), sensor="ground_truth"),
+    ev("split", 15.0, (1, 2), 15.0, pos=(4.0, 2.0), sensor="ground_truth"),
+    ev("correlated", 20.0, (3,), 25.0, pos=(6.0, 6.0), sensor="ground_truth"),
+    ev("disappear", 30.0, (5,), 31.0, pos=(9.8, 1.0), sensor="ground_truth"),
+]
+ID_MAP = {11: 1, 12: 2, 13: 3, 14: 4, 15: 5}  # tracker id -> ground-truth id
+
+
+def _perfect() -> list[Event]:
+    """What a good tracker reports: its own ids, times a little late, positions a little off."""
+    return [
+        ev("appear", 5.4, (14,), pos=(0.5, 3.1)),
+        ev("merge", 10.3, (11, 12), 10.3, pos=(2.2, 2.0)),
+        ev("split", 14.8, (12, 11), 14.8, pos=(4.1, 2.2)),
+        ev("correlated", 20.5, (13,), 24.0, pos=(6.3, 6.0)),
+        ev("disappear", 31.4, (15,), pos=(9.9, 1.0)),
+    ]
+
+
+def test_everything_detected_with_id_map() -> None:
+    scores = situation_accuracy(TRUE, _perfect(), id_map=ID_MAP)
+    assert list(scores) == list(EVENT_KINDS)
+    for kind, s in scores.items():
+        assert (s.true, s.detected, s.false_alarms, s.detections) == (1, 1, 0, 1), kind
+        assert (s.recall, s.precision) == (1.0, 1.0)
+
+
+def test_everything_detected_by_time_and_position_without_id_map() -> None:
+    scores = situation_accuracy(TRUE, _perfect())
+    assert [s.detected for s in scores.values()] == [1] * 5
+
+
+def test_time_outside_tolerance_is_a_miss_and_a_false_alarm() -> None:
+    late = [ev("merge", 11.5, (11, 12), 11.5)]  # 1.5 s after the true merge
+    s = situation_accuracy(TRUE, late, id_map=ID_MAP)["merge"]
+    assert (s.true, s.detected, s.false_alarms) == (1, 0, 1)
+    assert (s.recall, s.precision) == (0.0, 0.0)
+    s = situation_accuracy(TRUE, late, id_map=ID_MAP, time_tolerance_ns=2 * S)["merge"]
+    assert (s.detected, s.false_alarms) == (1, 0)
+
+
+def test_wrong_identities_do_not_match() -> None:
+    wrong = [ev("merge", 10.0, (13, 14), 10.0)]  # maps to gt 3 and 4, the true merge is 1 and 2
+    s = situation_accuracy(TRUE, wrong, id_map=ID_MAP)["merge"]
+    assert (s.detected, s.false_alarms) == (0, 1)
+    partly = [ev("merge", 10.0, (11, 99), 10.0)]  # one identity shared is enough; 99 is unmapped
+    assert situation_accuracy(TRUE, partly, id_map=ID_MAP)["merge"].detected == 1
+    unmapped = [ev("merge", 10.0, (98, 99), 10.0)]
+    assert situation_accuracy(TRUE, unmapped, id_map=ID_MAP)["merge"].false_alarms == 1
+
+
+def test_position_decides_without_id_map_only_when_both_have_one() -> None:
+    far = [ev("appear", 5.0, (14,), pos=(8.0, 3.0))]  # 7.8 m from where the true person entered
+    assert situation_accuracy(TRUE, far)["appear"].detected == 0
+    assert situation_accuracy(TRUE, far, position_tolerance_m=10.0)["appear"].detected == 1
+    assert situation_accuracy(TRUE, far, id_map=ID_MAP)["appear"].detected == 1  # ids decide, not position
+    no_pos = [ev("appear", 5.0, (77,))]
+    assert situation_accuracy(TRUE, no_pos)["appear"].detected == 1  # time only
+
+
+def test_each_true_event_is_detected_at_most_once() -> None:
+    twice = [ev("split", 15.0, (11, 12), 15.0), ev("split", 15.2, (11, 12), 15.2)]
+    s = situation_accuracy(TRUE, twice, id_map=ID_MAP)["split"]
+    assert (s.true, s.detected, s.false_alarms, s.detections) == (1, 1, 1, 2)
+    assert s.precision == 0.5
+
+
+def test_matching_maximises_the_number_of_matches() -> None:
+    """True at 0 s and 1 s, detections at 0.9 s and 1.9 s: pairing 0.9 with the nearer 1 s (greedy)
+    would leave 1.9 s unmatched; the one-to-one optimum matches both (0 - 0.9, 1 - 1.9)."""
+    true = [ev("merge", 0.0, (1, 2), 0.0), ev("merge", 1.0, (1, 2), 1.0)]
+    det = [ev("merge", 0.9, (1, 2), 0.9), ev("merge", 1.9, (1, 2), 1.9)]
+    assert match_events(true, det) == [(0, 0), (1, 1)]
+    assert situation_accuracy(true, det)["merge"].detected == 2
+    assert match_events(true, det[::-1]) == [(0, 1), (1, 0)]  # indices follow the input order
+
+
+def test_kinds_never_match_each_other() -> None:
+    det = [ev("split", 10.0, (11, 12), 10.0)]  # at the time of the true merge
+    scores = situation_accuracy(TRUE, det, id_map=ID_MAP)
+    assert (scores["merge"].detected, scores["split"].detected, scores["split"].false_alarms) == (0, 0, 1)
+
+
+def test_time_spans() -> None:
+    """A detection inside a true episode matches; the gap between spans is what the tolerance bounds."""
+    inside = [ev("correlated", 23.0, (13,), 23.5)]  # inside the true 20-25 s episode
+    assert situation_accuracy(TRUE, inside, id_map=ID_MAP)["correlated"].detected == 1
+    after = [ev("correlated", 26.5, (13,), 27.0)]  # starts 1.5 s after the episode ended
+    assert situation_accuracy(TRUE, after, id_map=ID_MAP)["correlated"].detected == 0
+    ongoing = [ev("correlated", 18.0, (13,))]  # t_end None: still going on, so it spans the episode
+    assert situation_accuracy(TRUE, ongoing, id_map=ID_MAP)["correlated"].detected == 1
+    gone = [ev("disappear", 31.9, (15,), 31.9)]  # 0.9 s after the true exit at 31 s
+    assert situation_accuracy(TRUE, gone, id_map=ID_MAP)["disappear"].detected == 1
+
+
+def test_empty_kinds_and_ignored_kinds() -> None:
+    scores = situation_accuracy([], [ev("meeting", 1.0), ev("merge", 2.0, (1, 2), 2.0)])
+    assert "meeting" not in scores
+    assert (scores["merge"].true, scores["merge"].false_alarms) == (0, 1)
+    assert math.isnan(scores["merge"].recall)
+    assert math.isnan(scores["split"].precision)
+    only = situation_accuracy(TRUE, _perfect(), kinds=("merge",), id_map=ID_MAP)
+    assert list(only) == ["merge"]
+
+
+def test_order_of_events_changes_nothing() -> None:
+    rng = np.random.default_rng(3)
+    det = [*_perfect(), ev("merge", 10.1, (11, 12), 10.1), ev("appear", 40.0, (16,))]
+    ref = {k: s.to_dict() for k, s in situation_accuracy(TRUE, det, id_map=ID_MAP).items()}
+    for _ in range(5):
+        t = [TRUE[i] for i in rng.permutation(len(TRUE))]
+        d = [det[i] for i in rng.permutation(len(det))]
+        assert {k: s.to_dict() for k, s in situation_accuracy(t, d, id_map=ID_MAP).items()} == ref
+
+
+def test_bad_options_raise() -> None:
+    with pytest.raises(EvaluationError, match="time_tolerance_ns"):
+        situation_accuracy(TRUE, [], time_tolerance_ns=-1)
+    with pytest.raises(EvaluationError, match="position_tolerance_m"):
+        situation_accuracy(TRUE, [], position_tolerance_m=float("nan"))
+
+
+def test_with_simulator_labels_and_the_mot_id_map() -> None:
+    """Two people meet and part in a 10 m room; the true events come from sim.situations, the tracker's
+    ids from evaluate_floor's identity map."""
+    dt = S // 10
+    frames, states = [], []
+    for k in range(60):  # 6 s: they approach, walk together (0.4 m apart) from ~2 s to ~4 s, and part
+        gap = float(np.clip(abs(k - 30) * 0.12, 0.4, 3.0))
+        xy = np.array([[5.0, 5.0 - gap / 2], [5.0, 5.0 + gap / 2]])
+        frames.append(GroundTruth(t_ns=T0 + k * dt, sensor="sim", frame_id="world", ids=[1, 2], positions_m=xy))
+        states += [TrackState(t_ns=T0 + k * dt, sensor="tracker", track_id=tid, position_m=p + 0.05)
+                   for tid, p in zip((101, 102), xy, strict=True)]
+    true = situation_events(frames, (0.0, 0.0, 10.0, 10.0))
+    kinds = [e.kind for e in true]
+    assert (kinds.count("merge"), kinds.count("split")) == (1, 1)
+    m = evaluate_floor(frames, states)
+    assert dict(m.id_map) == {101: 1, 102: 2}
+    merge_t = next(e.t_ns for e in true if e.kind == "merge")
+    split_t = next(e.t_ns for e in true if e.kind == "split")
+    detected = [Event(t_ns=merge_t + 2 * dt, sensor="tracker", kind="merge", t_end_ns=merge_t + 2 * dt,
+                      track_ids=(101, 102)),
+                Event(t_ns=split_t + 3 * dt, sensor="tracker", kind="split", t_end_ns=split_t + 3 * dt,
+                      track_ids=(101, 102)),
+                Event(t_ns=T0, sensor="tracker", kind="split", t_end_ns=T0, track_ids=(101, 102))]  # false alarm
+    scores = situation_accuracy(true, detected, id_map=m.id_map)
+    assert (scores["merge"].true, scores["merge"].detected, scores["merge"].false_alarms) == (1, 1, 0)
+    assert (scores["split"].true, scores["split"].detected, scores["split"].false_alarms) == (1, 1, 1)
+
+
+def test_situation_table() -> None:
+    from rich.console import Console
+
+    console = Console(width=120, record=True)
+    console.print(situation_table(situation_accuracy(TRUE, _perfect()[:2], id_map=ID_MAP)))
+    text = console.export_text()
+    assert all(cell in text for cell in ("merge", "disappear", "100.0", "0.0", "false alarms"))
