@@ -1,0 +1,13 @@
+"""Tracking maths of seed 001 (and the shared CV filter): pure, vectorised functions on arrays.
+
+The block diagram, one module per block (ALGORITHMS.md sections in brackets):
+
+- :mod:`.pf` — SIR particle-filter core over ``(n_targets, n_particles, ...)`` arrays [X1]
+- :mod:`.walking` — two-feet walking model, standing random walk, constant velocity [B8, B18, X5]
+- :mod:`.likelihood` — laser feet/walking-pattern likelihood, centroid likelihood [B9, B18]
+- :mod:`.association` — statistical-distance gate, association states c/r, Hungarian [B6, B10, X2]
+- :mod:`.situations` — the per-frame situation switch [B7]
+- :mod:`.kalman` — constant-velocity Kalman predict/update [X5]
+
+The stateful tracker that strings these together lives beside them and owns every array.
+"""

@@ -1,0 +1,153 @@
+"""Observation likelihoods of the laser particle filters (ALGORITHMS.md B9, B18).
+
+Seed 001: ``p(z | x) = P_pos · P_walk``, a feet-to-segment similarity times a walking-pattern
+similarity, assumed independent (functional forms RECON). Everything is evaluated for all targets and
+particles at once; each target is paired with *one* detection (its nearest gated one, B10), passed as
+row ``t`` of the observation arrays. A row whose observation holds ``NaN`` (no detection: coasting)
+gets log-likelihood 0, i.e. its weights are left as they are.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .walking import PHI, STATE_DIM, STRIDE, predicted_feet_distance
+
+__all__ = [
+    "centroid_likelihood",
+    "centroid_log_likelihood",
+    "laser_likelihood",
+    "laser_log_likelihood",
+]
+
+
+def _sqdist(px: np.ndarray, py: np.ndarray, qx: np.ndarray, qy: np.ndarray) -> np.ndarray:
+    dx = px - qx
+    dx *= dx
+    dy = py - qy
+    dy *= dy
+    dx += dy
+    return dx
+
+
+def laser_log_likelihood(state: np.ndarray, feet_obs: np.ndarray, inter_feet: np.ndarray, one_foot: np.ndarray,
+                         sigma_f: float = 0.10, sigma_w: float = 0.10, *, sigma_f_one: float = 0.15,
+                         kappa: float = 1.0 / np.pi, lateral_m: float = 0.0) -> np.ndarray:
+    """``log p(z | x) = log P_pos + log P_walk`` for walking particles against their detections (B9).
+
+    Feet-to-segment: each predicted foot goes to its nearest foot barycentre; if both go to the same
+    one and the segment has two (``one_foot`` False), the assignment with the smaller total (Euclidean)
+    distance is used. ``log P_pos = -(|p^L - f_L*|² + |p^R - f_R*|²) / (2σ_f²)``.
+    Walking pattern: ``log P_walk = -(S_d - D_pred(φ, S))² / (2σ_w²)`` with
+    ``D_pred = κ S |cos φ|`` (:func:`~fusiontrack.tracking.walking.predicted_feet_distance`).
+    For a one-foot segment ``P_walk = 1`` and ``σ_f = sigma_f_one``.
+
+    Parameters
+    ----------
+    state : (n_t, n_p, 8) float
+        Walking particles (columns in :mod:`fusiontrack.tracking.walking`).
+    feet_obs : (n_t, 2, 2) float
+        The two foot barycentres ``f_1, f_2`` of each target's detection, m (B5). ``NaN`` = no detection.
+    inter_feet : (n_t,) float
+        Measured inter-feet distance ``S_d = |f_1 - f_2|``, m.
+    one_foot : (n_t,) bool
+        B5's single-blob flag.
+    sigma_f, sigma_w : float
+        σ_f and σ_w of B9, m.
+    sigma_f_one : float
+        σ_f used for one-foot segments, m.
+    kappa, lateral_m : float
+        See :func:`~fusiontrack.tracking.walking.predicted_feet_distance`.
+
+    Returns
+    -------
+    log_likelihood : (n_t, n_p) float64
+        ``<= 0``; exactly 0 on rows without a detection.
+    """
+    x = np.asarray(state, dtype=np.float64)
+    f = np.asarray(feet_obs, dtype=np.float64)
+    n_t = x.shape[0]
+    if x.ndim != 3 or x.shape[-1] != STATE_DIM:
+        raise ValueError(f"state: expected shape (n_t, n_p, {STATE_DIM}), got {x.shape}")
+    if f.shape != (n_t, 2, 2):
+        raise ValueError(f"feet_obs: expected shape ({n_t}, 2, 2), got {f.shape}")
+    sd = np.broadcast_to(np.asarray(inter_feet, dtype=np.float64), (n_t,))
+    one = np.broadcast_to(np.asarray(one_foot, dtype=bool), (n_t,))
+    missing = np.isnan(f).any(axis=(1, 2)) | (np.isnan(sd) & ~one)
+    if missing.any():
+        f = np.where(missing[:, None, None], 0.0, f)
+        sd = np.where(missing, 0.0, sd)
+
+    cols = np.ascontiguousarray(x.reshape(-1, STATE_DIM).T).reshape(STATE_DIM, n_t, x.shape[1])  # (8, n_t, n_p)
+    f1x, f1y, f2x, f2y = (f.reshape(n_t, 4).T.copy()[:, :, None])  # each (n_t, 1)
+    lx, ly, rx, ry = cols[0], cols[1], cols[2], cols[3]
+
+    dl1, dl2 = _sqdist(lx, ly, f1x, f1y), _sqdist(lx, ly, f2x, f2y)
+    dr1, dr2 = _sqdist(rx, ry, f1x, f1y), _sqdist(rx, ry, f2x, f2y)
+    l_to_1 = dl1 <= dl2
+    same = l_to_1 == (dr1 <= dr2)
+    straight, crossed = dl1 + dr2, dl2 + dr1
+    # feet on different barycentres: the nearest-foot assignment itself (the smaller of the two
+    # pairings); both on the same one of a two-foot segment: the smaller total Euclidean distance
+    pick_straight = straight <= crossed
+    if same.any():
+        by_total = np.sqrt(dl1) + np.sqrt(dr2) <= np.sqrt(dl2) + np.sqrt(dr1)
+        pick_straight = np.where(same, by_total, pick_straight)
+    sq = np.where(pick_straight, straight, crossed)
+    if one.any():  # a one-foot segment: both feet go to the nearest (the same) barycentre
+        both = np.where(l_to_1, dl1 + dr1, dl2 + dr2)
+        sq[one] = both[one]
+    inv_f = np.where(one, 1.0 / (2.0 * sigma_f_one**2), 1.0 / (2.0 * sigma_f**2))[:, None]
+    log_l = sq * -inv_f
+    d_pred = predicted_feet_distance(cols[PHI], cols[STRIDE], kappa, lateral_m)
+    log_walk = (sd[:, None] - d_pred) ** 2 * (-1.0 / (2.0 * sigma_w**2))
+    if one.any():
+        log_walk[one] = 0.0
+    log_l += log_walk
+    if missing.any():
+        log_l[missing] = 0.0
+    return log_l
+
+
+def laser_likelihood(state: np.ndarray, feet_obs: np.ndarray, inter_feet: np.ndarray, one_foot: np.ndarray,
+                     sigma_f: float = 0.10, sigma_w: float = 0.10, **kwargs: float) -> np.ndarray:
+    """``p(z | x) = P_pos · P_walk`` (B9); see :func:`laser_log_likelihood` for the parameters.
+
+    Returns
+    -------
+    likelihood : (n_t, n_p) float64 in [0, 1]
+        May underflow to 0 far from the detection: weight with the log variant.
+    """
+    return np.exp(laser_log_likelihood(state, feet_obs, inter_feet, one_foot, sigma_f, sigma_w, **kwargs))
+
+
+def centroid_log_likelihood(positions_m: np.ndarray, centres_m: np.ndarray, sigma_m: float = 0.15) -> np.ndarray:
+    """Gaussian log-likelihood of a segment centroid, ``-|x - c|² / (2σ²)`` (B18, bicycles and cars).
+
+    Parameters
+    ----------
+    positions_m : (n_t, n_p, >=2) float
+        Particle states; the first two columns are the position (the CV state works as is).
+    centres_m : (n_t, 2) float
+        Each target's detection centroid; ``NaN`` row = no detection (log-likelihood 0).
+    sigma_m : float
+
+    Returns
+    -------
+    log_likelihood : (n_t, n_p) float64
+    """
+    p = np.asarray(positions_m, dtype=np.float64)
+    c = np.asarray(centres_m, dtype=np.float64)
+    if p.ndim != 3 or p.shape[-1] < 2 or c.shape != (p.shape[0], 2):
+        raise ValueError(f"positions_m (n_t, n_p, >=2) and centres_m (n_t, 2) disagree: {p.shape} vs {c.shape}")
+    missing = np.isnan(c).any(axis=1)
+    c = np.where(missing[:, None], 0.0, c)
+    d = p[..., 0:2] - c[:, None, :]
+    out = -np.einsum("tpk,tpk->tp", d, d) / (2.0 * sigma_m**2)
+    out[missing] = 0.0
+    return out
+
+
+def centroid_likelihood(positions_m: np.ndarray, centres_m: np.ndarray, sigma_m: float = 0.15) -> np.ndarray:
+    """``exp`` of :func:`centroid_log_likelihood`, ``(n_t, n_p)``."""
+    return np.exp(centroid_log_likelihood(positions_m, centres_m, sigma_m))
