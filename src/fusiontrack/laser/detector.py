@@ -1,0 +1,264 @@
+"""Laser people detection from several scanners: background, foreground points in the world, two-feet segments.
+
+Per scan (:meth:`LaserPeopleDetector.update`), for the scanner that made it:
+
+1. the scanner's :class:`~fusiontrack.laser.background.BeamBackground` (ALGORITHMS.md A7 + B3) marks the
+   foreground beams;
+2. the foreground beams are clustered in beam order (A8, :func:`~fusiontrack.laser.clustering.cluster_scan`)
+   only to drop isolated beams (clusters of fewer than ``min_cluster_points``; mixed pixels at edges);
+3. the surviving points are moved into the world frame with the scanner's ``laser2world`` (B2).
+
+Per frame (:meth:`LaserPeopleDetector.detect`): the latest foreground points of every scanner are pooled,
+segmented by mean-shift (B4) and split into feet (B5), and each segment becomes one
+:class:`~fusiontrack.types.Detection`.
+
+Timing assumptions
+------------------
+* A scan's time is its ``t_ns`` (the header stamp: the start of the sweep). Points are not motion
+  compensated, neither within a sweep (≤ 0.1 s at 10 Hz: a walker moves ≤ 0.15 m) nor between scanners.
+* :meth:`detect` pools, per scanner, the latest accepted scan whose ``t_ns`` lies within ``max_age_s`` of
+  the requested time (either side). A scanner that went silent simply stops contributing once its last
+  scan is older than that; call ``detect`` once per tracking cycle, e.g. with the newest scan's time.
+* Scans must arrive in time order per scanner: a scan older than that scanner's latest accepted one is
+  dropped (counted in :attr:`LaserPeopleDetector.dropped_scans`, as are scans whose beam angles are not
+  finite); scanners are independent of each other.
+* The background needs ``n_init`` scans per scanner (5 s at 10 Hz by default) before anything is
+  foreground, and again after a change of beam count or beam angles (logged warning).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from fusiontrack.errors import ConfigError
+from fusiontrack.laser.background import BeamBackground, InitMethod
+from fusiontrack.laser.clustering import Segments, cluster_scan, mean_shift_segments
+from fusiontrack.types import Detection, LaserScan
+
+__all__ = ["LaserPeopleDetector", "planar_pose"]
+
+log = logging.getLogger(__name__)
+
+
+def planar_pose(laser2world: Any, name: str = "laser2world") -> tuple[np.ndarray, np.ndarray]:
+    """Rotation ``(2, 2)`` and translation ``(2,)`` on the floor from a ``(3, 3)`` 2-D pose or ``(4, 4)`` transform.
+
+    A ``(4, 4)`` transform maps scan points (``z = 0`` in the laser frame) to ``(x, y)`` as
+    :func:`fusiontrack.geometry.transform_points` does; a tilted scanner is thereby projected, not corrected.
+    """
+    T = np.asarray(laser2world, dtype=np.float64)
+    if T.shape not in ((3, 3), (4, 4)) or not np.all(np.isfinite(T)):
+        raise ValueError(f"{name}: expected a finite (3, 3) 2-D pose or (4, 4) transform, got shape {T.shape}")
+    d = T.shape[0] - 1
+    R = T[:d, :d]
+    if not (np.allclose(R @ R.T, np.eye(d), atol=1e-6) and np.allclose(T[d], np.eye(d + 1)[d])):
+        raise ValueError(f"{name}: not a rigid transform (rotation not orthonormal or last row not 0..0 1)")
+    R2, t2 = T[:2, :2].copy(), T[:2, d].copy()
+    R2.setflags(write=False)
+    t2.setflags(write=False)
+    return R2, t2
+
+
+class _Scanner:
+    """Mutable per-scanner state (the detector's, not shared)."""
+
+    __slots__ = ("background", "geometry", "points_m", "rotation", "t_ns", "translation")
+
+    def __init__(self, rotation: np.ndarray, translation: np.ndarray) -> None:
+        self.rotation = rotation
+        self.translation = translation
+        self.background: BeamBackground | None = None
+        self.geometry: tuple[int, float, float] | None = None
+        self.t_ns: int | None = None
+        self.points_m = np.zeros((0, 2))
+
+
+class LaserPeopleDetector:
+    """Two-feet segment detections from one or several 2-D laser scanners (seed 001; ALGORITHMS.md A7, A8, B2–B5).
+
+    Parameters
+    ----------
+    scanners : mapping of sensor name -> laser2world
+        The ``sensor`` of each scanner's :class:`~fusiontrack.types.LaserScan` and its pose in the world:
+        a ``(3, 3)`` 2-D pose or a ``(4, 4)`` rigid transform.
+    alpha, beta, gamma, tau_fg_m, n_init, init, bin_m :
+        Background model of every scanner, see :class:`~fusiontrack.laser.background.BeamBackground`
+        (defaults A7 with B3's mode initialisation).
+    c0_m : float
+        A8 breakpoint constant for clustering the foreground beams (0.20 m).
+    min_cluster_points : int
+        Foreground beam-order clusters smaller than this are dropped (A8 ``n_min`` = 2); 1 keeps all.
+    bandwidth_m, merge_m, min_segment_points :
+        Mean-shift (B4): ``h`` = 0.40 m, modes closer than ``merge_m`` (default ``h / 2``) merge, segments
+        need ``min_segment_points`` (3).
+    pair_feet_m, foot_radius_m :
+        Foot pairing after the mean-shift (see :func:`~fusiontrack.laser.clustering.mean_shift_segments`):
+        two mutually nearest segments whose union splits into two feet (every point within ``foot_radius_m``
+        = 0.15 m of its foot's barycentre) at most ``pair_feet_m`` = 0.8 m apart become one segment, so a
+        walker at a long stride is one detection, not two. ``pair_feet_m=None`` gives pure B4.
+    d_one_foot_m : float
+        B5: feet closer than this (0.12 m) make a one-foot segment.
+    min_sigma_m : float
+        The detection covariance is ``min_sigma_m**2 I`` plus the sample covariance of the segment's points.
+    max_age_s : float
+        How far a scanner's latest scan may be from the time passed to :meth:`detect` (0.2 s).
+    sensor : str
+        ``sensor`` of the detections (``"laser"``).
+    """
+
+    def __init__(self, scanners: Mapping[str, Any], *, alpha: float = 0.005, beta: float = 0.05,
+                 gamma: float | None = None, tau_fg_m: float = 0.20, n_init: int = 50, init: InitMethod = "mode",
+                 bin_m: float = 0.05, c0_m: float = 0.20, min_cluster_points: int = 2, bandwidth_m: float = 0.40,
+                 merge_m: float | None = None, min_segment_points: int = 3, pair_feet_m: float | None = 0.8,
+                 foot_radius_m: float = 0.15, d_one_foot_m: float = 0.12,
+                 min_sigma_m: float = 0.05, max_age_s: float = 0.2, sensor: str = "laser") -> None:
+        if not isinstance(scanners, Mapping) or not scanners:
+            raise ValueError("scanners: expected a non-empty mapping of sensor name -> laser2world")
+        self._scanners = {str(name): _Scanner(*planar_pose(T, f"scanners[{name!r}]"))
+                          for name, T in scanners.items()}
+        self._bg_args = {"alpha": alpha, "beta": beta, "tau_fg_m": tau_fg_m, "n_init": n_init, "init": init,
+                         "bin_m": bin_m, "gamma": gamma}
+        BeamBackground(1, **self._bg_args)  # validate the background parameters now, not at the first scan
+        # Validate the clustering parameters once, on empty input.
+        cluster_scan(np.zeros(0), 0.0, 0.01, c0_m=c0_m, n_min=min_cluster_points)
+        mean_shift_segments(np.zeros((0, 2)), bandwidth_m, n_min=min_segment_points, merge_m=merge_m,
+                            pair_feet_m=pair_feet_m, foot_radius_m=foot_radius_m, d_one_foot_m=d_one_foot_m)
+        self.c0_m = float(c0_m)
+        self.min_cluster_points = int(min_cluster_points)
+        self.bandwidth_m = float(bandwidth_m)
+        self.merge_m = merge_m
+        self.min_segment_points = int(min_segment_points)
+        self.pair_feet_m = pair_feet_m
+        self.foot_radius_m = float(foot_radius_m)
+        self.d_one_foot_m = float(d_one_foot_m)
+        self.min_sigma_m = float(min_sigma_m)
+        if not (math.isfinite(self.min_sigma_m) and self.min_sigma_m >= 0):
+            raise ValueError(f"min_sigma_m: expected a finite value >= 0 m, got {min_sigma_m}")
+        self.max_age_s = float(max_age_s)
+        if not (self.max_age_s >= 0 and math.isfinite(self.max_age_s)):
+            raise ValueError(f"max_age_s: expected a finite value >= 0 s, got {max_age_s}")
+        self._max_age_ns = round(self.max_age_s * 1e9)
+        self.sensor = str(sensor)
+        self.dropped_scans: dict[str, int] = dict.fromkeys(self._scanners, 0)
+        """Scans dropped per scanner: out of order, or without usable beam angles."""
+        self._warned: set[str] = set()
+
+    # ---------------------------------------------------------------------------------------------
+    @property
+    def scanners(self) -> tuple[str, ...]:
+        return tuple(self._scanners)
+
+    def background(self, sensor: str) -> BeamBackground | None:
+        """The background model of one scanner (``None`` before its first scan)."""
+        return self._state(sensor).background
+
+    def _state(self, sensor: str) -> _Scanner:
+        try:
+            return self._scanners[sensor]
+        except KeyError:
+            raise ConfigError(f"laser scan from sensor {sensor!r}, but the detector knows only "
+                              f"{sorted(self._scanners)}; name every scanner in 'scanners'") from None
+
+    def update(self, scan: LaserScan) -> None:
+        """Take one scan: update its scanner's background and keep its foreground points (world frame).
+
+        Raises
+        ------
+        ConfigError
+            ``scan.sensor`` is not one of the configured scanners.
+        """
+        st = self._state(scan.sensor)
+        if st.t_ns is not None and scan.t_ns < st.t_ns:
+            self.dropped_scans[scan.sensor] += 1
+            log.debug("laser %s: dropped a scan at %d ns, older than the last one (%d ns)", scan.sensor,
+                      scan.t_ns, st.t_ns)
+            return
+        geometry = (scan.n_beams, scan.angle_min_rad, scan.angle_increment_rad)
+        if not (math.isfinite(scan.angle_min_rad) and math.isfinite(scan.angle_increment_rad)
+                and scan.angle_increment_rad != 0):
+            self.dropped_scans[scan.sensor] += 1
+            if scan.sensor not in self._warned:
+                self._warned.add(scan.sensor)
+                log.warning("laser %s: dropping scans without usable beam angles (angle_min %s, increment %s)",
+                            scan.sensor, scan.angle_min_rad, scan.angle_increment_rad)
+            return
+        if st.background is None:
+            # Odd limits in a scan header must not stop the detector: fall back to (0, inf).
+            r_min = scan.range_min_m if math.isfinite(scan.range_min_m) and scan.range_min_m > 0 else 0.0
+            r_max = scan.range_max_m if scan.range_max_m > r_min else math.inf
+            st.background = BeamBackground(max(scan.n_beams, 1), **self._bg_args, range_min_m=r_min,
+                                           range_max_m=r_max)
+        elif geometry != st.geometry:
+            log.warning("laser %s: scan geometry changed from %s to %s (beams, angle_min, increment); "
+                        "relearning its background", scan.sensor, st.geometry, geometry)
+            st.background.reset(max(scan.n_beams, 1))
+        st.geometry = geometry
+        st.t_ns = scan.t_ns
+        r = scan.valid_ranges_m()
+        fg = st.background.update(r) if r.size else np.zeros(0, bool)
+        if not fg.any():
+            st.points_m = np.zeros((0, 2))
+            return
+        clusters = cluster_scan(np.where(fg, r, np.nan), scan.angle_min_rad, scan.angle_increment_rad,
+                                c0_m=self.c0_m, n_min=self.min_cluster_points)
+        keep = np.flatnonzero(clusters.labels >= 0)
+        a = scan.angle_min_rad + keep * scan.angle_increment_rad
+        local = np.column_stack([r[keep] * np.cos(a), r[keep] * np.sin(a)])
+        st.points_m = local @ st.rotation.T + st.translation
+
+    # ---------------------------------------------------------------------------------------------
+    def foreground_points(self, t_ns: int) -> tuple[np.ndarray, np.ndarray]:
+        """The pooled foreground points of every scanner with a scan within ``max_age_s`` of ``t_ns``.
+
+        Returns
+        -------
+        points_m : (n, 2) float64
+            World frame, metres, grouped by scanner in configuration order.
+        scanner : (n,) int64
+            Index into :attr:`scanners` of the scanner each point came from.
+        """
+        parts, owner = [], []
+        for i, st in enumerate(self._scanners.values()):
+            if st.t_ns is not None and abs(int(t_ns) - st.t_ns) <= self._max_age_ns and len(st.points_m):
+                parts.append(st.points_m)
+                owner.append(np.full(len(st.points_m), i, dtype=np.int64))
+        if not parts:
+            return np.zeros((0, 2)), np.zeros(0, np.int64)
+        return np.concatenate(parts), np.concatenate(owner)
+
+    def segments(self, t_ns: int) -> tuple[np.ndarray, Segments]:
+        """Array form of :meth:`detect`: the pooled points ``(n, 2)`` and their :class:`Segments`."""
+        points, _ = self.foreground_points(t_ns)
+        return points, mean_shift_segments(points, self.bandwidth_m, n_min=self.min_segment_points,
+                                           merge_m=self.merge_m, pair_feet_m=self.pair_feet_m,
+                                           foot_radius_m=self.foot_radius_m, d_one_foot_m=self.d_one_foot_m)
+
+    def detect(self, t_ns: int) -> list[Detection]:
+        """Two-feet segments at ``t_ns`` as detections (world frame), one per segment.
+
+        Each detection has ``position_m`` = the segment centre (mean point), ``covariance_m2`` =
+        ``min_sigma_m**2 I`` + the points' sample covariance, ``sensor`` = :attr:`sensor`, ``cls`` unknown
+        (the classifier decides), and features ``"feet_m"`` (2, 2), ``"points_m"`` (k, 2),
+        ``"inter_feet_m"`` () float, ``"one_foot"`` () bool, ``"mode_m"`` (2,) the mean-shift mode.
+        """
+        t_ns = int(t_ns)
+        points, seg = self.segments(t_ns)
+        k = len(seg)
+        if k == 0:
+            return []
+        on = np.flatnonzero(seg.labels >= 0)
+        order = on[np.argsort(seg.labels[on], kind="stable")]
+        groups = np.split(points[order], np.cumsum(seg.n_points)[:-1])
+        cov = seg.covariances_m2 + self.min_sigma_m**2 * np.eye(2)
+        return [
+            Detection(t_ns, self.sensor, position_m=seg.centres_m[j], covariance_m2=cov[j],
+                      features={"feet_m": seg.feet_m[j], "points_m": groups[j],
+                                "inter_feet_m": np.asarray(seg.inter_feet_m[j]),
+                                "one_foot": np.asarray(seg.one_foot[j]), "mode_m": seg.modes_m[j]})
+            for j in range(k)
+        ]
