@@ -4,7 +4,6 @@ and the labelled leg clusters of the leg_tracker training bag."""
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
 
 import numpy as np
@@ -302,26 +301,19 @@ def test_b5_labels_are_checked() -> None:
 # ---- speed ----------------------------------------------------------------------------------------
 
 
-def test_mean_shift_is_fast_for_ten_people_and_faster_than_scikit_learn() -> None:
-    """~10 people seen by 2 scanners (≈ 160 points): segments + feet in well under a few ms."""
+def test_ten_walkers_seen_by_two_scanners_give_ten_segments() -> None:
+    """~10 people seen by 2 scanners (≈ 160 points); speed against scikit-learn is in
+    benchmarks/laser_detection.py, not asserted here."""
     rng = np.random.default_rng(RNG_SEED)
     people = rng.uniform(0, 10, (10, 2))
     sensors = np.array([[0.0, 0.0], [10.0, 10.0]])
     legs = [_leg_arc(p + o, s, 4) for p in people for o in (np.array([0.15, 0]), np.array([-0.15, 0]))
             for s in sensors]
     pts = np.vstack(legs)
-    assert len(mean_shift_segments(pts)) == 10
-    times = []
-    for _ in range(30):
-        t0 = time.perf_counter()
-        mean_shift_segments(pts)
-        times.append(time.perf_counter() - t0)
-    ours = float(np.median(times))
-    t0 = time.perf_counter()
-    MeanShift(bandwidth=0.4).fit(pts)
-    theirs = time.perf_counter() - t0
-    assert ours < 5e-3  # measured ≈ 0.3 ms; generous for a loaded CI machine
-    assert theirs > 10 * ours  # measured ≈ 100 ms for scikit-learn
+    segs = mean_shift_segments(pts)
+    assert len(segs) == 10
+    d = np.linalg.norm(segs.centres_m[:, None, :] - people[None, :, :], axis=2)
+    assert np.all(d.min(axis=1) < 0.05)
 
 
 # ---- real data: labelled leg clusters ----------------------------------------------------------------------
