@@ -184,11 +184,13 @@ class Recording:
 
     @property
     def start_ns(self) -> int:
-        return min(r.start_time for r in self._readers)
+        """Log time of the first message (0 for an empty recording)."""
+        return min(r.start_time for r in self._readers) if self.message_count else 0
 
     @property
     def end_ns(self) -> int:
-        return max(r.end_time for r in self._readers)
+        """Log time of the last message (0 for an empty recording)."""
+        return max(r.end_time for r in self._readers) if self.message_count else 0
 
     @property
     def duration_s(self) -> float:
