@@ -79,7 +79,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from ..io.tracks import MotBoxes, read_mot
+from ..io.tracks import MotBoxes, flatten_states, read_mot
 from ..types import GroundTruth, ObjectClass, Track, TrackState
 from .errors import EvaluationError
 
@@ -368,18 +368,6 @@ def _class_filter(classes: Iterable[str] | None) -> frozenset[str] | None:
                               f"{tuple(classes)!r}") from err
 
 
-def _flatten_states(tracks: Iterable[TrackState | Track]) -> list[TrackState]:
-    states: list[TrackState] = []
-    for item in tracks:
-        if isinstance(item, Track):
-            states.extend(item.states)
-        elif isinstance(item, TrackState):
-            states.append(item)
-        else:
-            raise EvaluationError(f"tracks: expected TrackState or Track records, got {type(item).__name__}")
-    return states
-
-
 def _floor_sequence(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Track], threshold_m: float,
                     classes: frozenset[str] | None, time_tolerance_ns: int | None, name: str) -> _Sequence:
     frames = sorted(gt, key=lambda f: f.t_ns)
@@ -406,7 +394,7 @@ def _floor_sequence(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Tra
         gt_pos.append(f.positions_m[keep][order])
 
     # track states -> nearest ground-truth frame within the tolerance, one state per (frame, track)
-    states = [s for s in _flatten_states(tracks) if classes is None or s.cls in classes]
+    states = [s for s in flatten_states(tracks) if classes is None or s.cls in classes]
     st_t = np.array([s.t_ns for s in states], dtype=np.int64)
     st_id = np.array([s.track_id for s in states], dtype=np.int64)
     st_xy = np.array([s.position_m for s in states], dtype=np.float64).reshape(-1, 2)

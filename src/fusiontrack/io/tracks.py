@@ -84,7 +84,8 @@ def _open_for_reading(path: Path, what: str) -> TextIO:
         raise RecordingError(f"{path}: cannot be read ({err.strerror or err}; expected {what})") from err
 
 
-def _flatten_states(items: Iterable[TrackState | Track]) -> list[TrackState]:
+def flatten_states(items: Iterable[TrackState | Track]) -> list[TrackState]:
+    """Track states from a mix of TrackState and Track records, in the given order."""
     states: list[TrackState] = []
     for item in items:
         if isinstance(item, Track):
@@ -157,7 +158,7 @@ def write_tracks_csv(path: str | Path, tracks: Iterable[TrackState | Track]) -> 
         The file cannot be written.
     """
     path = Path(path)
-    states = sorted(_flatten_states(tracks), key=lambda s: (s.t_ns, s.track_id))
+    states = sorted(flatten_states(tracks), key=lambda s: (s.t_ns, s.track_id))
     rows = []
     for s in states:
         if any("|" in name for name in s.sensors):
@@ -343,7 +344,7 @@ def write_mot(
     path = Path(path)
     if frame_of is None and (fps is None or not fps > 0):
         raise ConfigError(f"write_mot: give frame_of or a positive fps (got fps={fps!r})")
-    all_states = _flatten_states(tracks)
+    all_states = flatten_states(tracks)
     states = [s for s in all_states if s.box_px is not None]
     t_ns = np.array([s.t_ns for s in states], dtype=np.int64)
     if frame_of is None:
