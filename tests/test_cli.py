@@ -138,3 +138,28 @@ def test_simulate_refuses_an_unknown_scenario(tmp_path):
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2
     assert "unknown scenario 'crowed'" in result.stderr
+
+
+def test_track_and_eval_a_simulated_crossing(tmp_path):
+    rec = tmp_path / "sim"
+    run("simulate", "crossing", "--seconds", "12", "--seed", "5", "--set", "cameras=[]", "-o", str(rec))
+    out = tmp_path / "tracks"
+    run("track", str(rec), "-o", str(out))
+    for name in ("tracks.csv", "tracks.jsonl", "tracks.mp4"):
+        assert (out / name).stat().st_size > 0
+    metrics_json = tmp_path / "m.json"
+    printed = run("eval", str(out), str(rec), "-o", str(metrics_json)).stdout
+    assert "MOTA" in printed
+    metrics = json.loads(metrics_json.read_text())["metrics"]
+    # three people crossing, two lasers, truth at 25 Hz: a laser tracker must get most of it right
+    assert metrics["mota"] > 0.7
+    assert metrics["id_switches"] <= 2
+
+
+def test_eval_of_mot_files_reproduces_tud_campus(shared_data, tmp_path):
+    tud = shared_data / "mot_reference/motmetrics_tud/TUD-Campus"
+    out = tmp_path / "m.json"
+    run("eval", str(tud / "test.txt"), str(tud / "gt.txt"), "-o", str(out))
+    metrics = json.loads(out.read_text())["metrics"]
+    assert round(100 * metrics["mota"], 1) == 52.6  # published: devkit README / py-motmetrics
+    assert round(100 * metrics["idf1"], 1) == 55.8

@@ -313,6 +313,145 @@ def simulate(
 
 
 # --------------------------------------------------------------------------------------------------
+# track, eval
+# --------------------------------------------------------------------------------------------------
+
+PIPELINES = {"people-laser": "people tracked with 2D lasers (seed 001's laser side)"}
+
+
+@app.command()
+def track(
+    recordings: Annotated[list[Path], typer.Argument(help="Recording(s) with LaserScan topics.")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Folder for tracks, events and video.")],
+    pipeline: Annotated[str, typer.Option(help=f"One of: {', '.join(PIPELINES)}.")] = "people-laser",
+    config: Annotated[Path | None, typer.Option("--config", "-c", help="Pipeline file: sensors, topics, clock "
+                                                "offsets, [laser] and [tracking] parameters.")] = None,
+    tracker_kind: Annotated[str, typer.Option("--tracker", help="pf (two-feet particle filters) or kalman "
+                                              "(constant-velocity baseline).")] = "pf",
+    time_source: Annotated[str, typer.Option("--time", help="header (capture stamps) or log (recorder).")] = "header",
+    video: Annotated[bool, typer.Option(help="Also write a bird's-eye video with the tracks.")] = True,
+    seed: Annotated[int, typer.Option(help="Random seed of the particle filters.")] = 0,
+) -> None:
+    """Track people in a recording; writes tracks.csv, tracks.jsonl (states + events) and tracks.mp4."""
+    from .io.tracks import write_jsonl, write_tracks_csv
+    from .tracking.tracker import track_recording
+
+    if pipeline not in PIPELINES:
+        raise ConfigError(f"--pipeline: expected one of {', '.join(PIPELINES)}, got {pipeline!r}")
+    if time_source not in ("header", "log"):
+        raise ConfigError(f"--time: expected 'header' or 'log', got {time_source!r}")
+    cfg = _load_config(config)
+    topics = [s.topic for s in cfg.sensors.values() if s.kind == "laser"] or None
+    timings: dict[str, list[float]] = {"detect_s": [], "track_s": []}
+    with progress() as bar:
+        task = bar.add_task(f"tracking ({tracker_kind})", total=1.0)
+        states, events = track_recording(
+            recordings, tracker=tracker_kind, params=cfg.tracking or None, topics=topics, time_source=time_source,
+            clock_corrections_ns=cfg.clock_corrections_ns(), detector_params=cfg.laser or None, rng=seed,
+            timings=timings, progress=lambda f: bar.update(task, completed=f))
+    output.mkdir(parents=True, exist_ok=True)
+    write_tracks_csv(output / "tracks.csv", states)
+    write_jsonl(output / "tracks.jsonl", [*states, *events])
+    n_tracks = len({s.track_id for s in states})
+    kinds: dict[str, int] = {}
+    for ev in events:
+        kinds[ev.kind] = kinds.get(ev.kind, 0) + 1
+    import numpy as np
+
+    per_scan = (np.array(timings["detect_s"]) + np.array(timings["track_s"])) * 1e3 if timings["track_s"] else []
+    console.print(f"{n_tracks} tracks, {len(states)} states, events {kinds or 'none'}"
+                  + (f"; per scan median {np.median(per_scan):.2f} ms, p95 {np.percentile(per_scan, 95):.2f} ms"
+                     if len(per_scan) else "") + f" -> {output}")
+    if video:
+        from .viz.preview import render_preview
+
+        drawn = render_preview(recordings, output / "tracks.mp4", tracks=states)
+        console.print(f"video: {output / 'tracks.mp4'} ({drawn.frames} frames)")
+
+
+def _read_tracks(path: Path) -> tuple[list[Any], list[Any]]:
+    from .io.tracks import read_jsonl, read_tracks_csv
+    from .types import Event, TrackState
+
+    if path.is_dir():
+        path = path / "tracks.jsonl" if (path / "tracks.jsonl").exists() else path / "tracks.csv"
+    if path.suffix == ".csv":
+        return read_tracks_csv(path), []
+    records = read_jsonl(path)
+    return [r for r in records if isinstance(r, TrackState)], [r for r in records if isinstance(r, Event)]
+
+
+def _read_truth(path: Path, topic: str | None, time_source: str) -> tuple[list[Any], str]:
+    from .io.recording import Recording
+    from .types import GroundTruth
+
+    with Recording(path) as rec:
+        info = rec.topics()
+        if topic is None:
+            candidates = [t for t, i in info.items() if i.msgtype in ("fusiontrack_msgs/msg/GroundTruth",
+                                                                    "leg_tracker/msg/Person")]
+            topic = "/ground_truth" if "/ground_truth" in candidates else (candidates[0] if len(candidates) == 1
+                                                                           else None)
+            if topic is None:
+                raise ConfigError(f"{path}: say which ground-truth topic to use with --topic "
+                                  f"(found {', '.join(candidates) or 'none'})")
+        frames = [m for m in rec.messages([topic], time_source=time_source) if isinstance(m, GroundTruth)]
+    return frames, topic
+
+
+@app.command(name="eval")
+def eval_(
+    tracks: Annotated[Path, typer.Argument(help="tracks.csv / tracks.jsonl (or the folder of `fusiontrack track`),"
+                                                " or a MOTChallenge result file.")],
+    ground_truth: Annotated[Path, typer.Argument(help="Recording with ground truth, or a MOTChallenge gt file.")],
+    threshold: Annotated[float, typer.Option(help="Floor-plane match distance in metres.")] = 0.5,
+    topic: Annotated[str | None, typer.Option(help="Ground-truth topic (default: /ground_truth, or the only one).")
+                     ] = None,
+    time_source: Annotated[str, typer.Option("--time", help="Ground-truth times: header or log.")] = "header",
+    output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the metrics as JSON here.")] = None,
+) -> None:
+    """Score tracks against ground truth: MOTA, MOTP, IDF1, ID switches, HOTA, FP, FN, MT/ML (TrackEval).
+
+    Floor-plane tracks are matched within --threshold metres; MOTChallenge box files by IoU >= 0.5.
+    For a simulated recording, situation detection (seed 001 Table II) is scored too.
+    """
+    from .eval import evaluate_floor, evaluate_mot_files, metrics_table, situation_accuracy, situation_table
+
+    result: dict[str, Any] = {}
+    if tracks.suffix == ".txt":
+        metrics = evaluate_mot_files(ground_truth, tracks)
+        console.print(metrics_table({tracks.name: metrics}))
+        result["metrics"] = metrics.to_dict()
+    else:
+        states, events = _read_tracks(tracks)
+        frames, gt_topic = _read_truth(ground_truth, topic, time_source)
+        metrics = evaluate_floor(frames, states, threshold_m=threshold)
+        console.print(metrics_table({f"{tracks.name} vs {gt_topic}": metrics},
+                                    title=f"tracking, match within {threshold:g} m"))
+        result["metrics"] = metrics.to_dict()
+        if events and frames and "situation" in frames[0].attributes:
+            from .sim.situations import situation_events
+
+            bounds = _bounds_of(ground_truth)
+            truth_events = situation_events(frames, bounds) if bounds is not None else []
+            scores = situation_accuracy(truth_events, events, id_map=metrics.id_map)
+            console.print(situation_table(scores, title="situation detection (seed 001 Table II)"))
+            result["situations"] = {k: v.to_dict() if hasattr(v, "to_dict") else vars(v) for k, v in scores.items()}
+    if output is not None:
+        output.parent.mkdir(parents=True, exist_ok=True)
+        output.write_text(json.dumps(result, indent=2, default=float))
+        console.print(f"metrics: {output}")
+
+
+def _bounds_of(recording: Path) -> Any:
+    """The area of a recording made by `fusiontrack simulate` (its ground_truth/world.json), else None."""
+    world = recording / "ground_truth" / "world.json" if recording.is_dir() else None
+    if world is None or not world.exists():
+        return None
+    return json.loads(world.read_text())["bounds_m"]
+
+
+# --------------------------------------------------------------------------------------------------
 # demo
 # --------------------------------------------------------------------------------------------------
 

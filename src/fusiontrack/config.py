@@ -97,6 +97,10 @@ class PipelineConfig(_Model):
     pipeline: PipelineHeader = PipelineHeader()
     sync: SyncConfig = SyncConfig()
     sensors: dict[str, SensorConfig] = Field(default_factory=dict)
+    laser: dict[str, Any] = Field(default_factory=dict)
+    """Laser detector parameters (keyword arguments of ``LaserPeopleDetector``; checked by it)."""
+    tracking: dict[str, Any] = Field(default_factory=dict)
+    """Tracker parameters (fields of ``TrackerParams``; checked by it)."""
 
     def topics(self) -> dict[str, str]:
         """topic -> sensor name, for :class:`fusiontrack.io.Recording`'s ``sensors`` argument."""

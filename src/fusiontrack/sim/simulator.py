@@ -16,7 +16,7 @@ Output (``simulate(scenario, out)``): ``out/`` is an ordinary rosbag2 MCAP recor
 * ``/ground_truth/steps``: heel strikes (one GroundTruth per step, attribute ``foot``).
 
 and ``out/ground_truth/`` holds the same truth as CSV (agents, per-camera boxes, steps, incidents,
-situation events) plus ``incidents.jsonl``.
+situation events) plus ``incidents.jsonl`` and ``world.json`` (area bounds, walls, pillars, boxes, roads).
 
 Sensor messages carry header stamps on the sensor's clock (true time + clock offset + jitter) and
 are logged at true time + latency, so clock correction and reordering are exercised exactly as
@@ -26,6 +26,7 @@ with real recordings. Ground truth is stamped with true time.
 from __future__ import annotations
 
 import csv
+import json
 import logging
 import time
 import zlib
@@ -297,6 +298,12 @@ class Simulation:
     def _write_csv(self, folder: Path, frames: list[AgentSnapshot], situations: list[np.ndarray],
                    camera_truth: dict[str, list]) -> None:
         folder.mkdir(parents=True, exist_ok=True)
+        w = self.world
+        (folder / "world.json").write_text(json.dumps({
+            "scenario": self.scenario.name, "seed": self.seed, "duration_s": self.duration_s,
+            "bounds_m": w.bounds_m.tolist(), "walls": w.walls.tolist(), "pillars": w.pillars.tolist(),
+            "boxes": w.boxes.tolist(), "roads": w.roads.tolist(), "lane_width_m": w.lane_width_m,
+            "t0_ns": T0_NS}, indent=1))
 
         def t(ns: int) -> str:
             return f"{(ns - T0_NS) / 1e9:.6f}"

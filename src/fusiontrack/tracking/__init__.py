@@ -8,6 +8,12 @@ The block diagram, one module per block (ALGORITHMS.md sections in brackets):
 - :mod:`.association` — statistical-distance gate, association states c/r, Hungarian [B6, B10, X2]
 - :mod:`.situations` — the per-frame situation switch [B7]
 - :mod:`.kalman` — constant-velocity Kalman predict/update [X5]
-
-The stateful tracker that strings these together lives beside them and owns every array.
+- :mod:`.tracker` — the stateful laser people tracker that strings them together (B6-B10, B17), and
+  :func:`track_recording` (detector + tracker over a recording)
+- :mod:`.baseline` — constant-velocity Kalman + Hungarian tracker, the comparison baseline
 """
+
+from .baseline import CVKalmanTracker
+from .tracker import LaserPeopleTracker, TrackerParams, track_recording
+
+__all__ = ["CVKalmanTracker", "LaserPeopleTracker", "TrackerParams", "track_recording"]

@@ -19,7 +19,7 @@ from ..errors import ConfigError, RecordingError
 from ..geometry import TransformTree, scan_to_points, transform_points
 from ..io.recording import Recording
 from ..io.video import write_video
-from ..types import GroundTruth, Image, LaserScan, Transform
+from ..types import GroundTruth, Image, LaserScan, TrackState, Transform
 from .birdseye import BirdseyeView
 
 log = logging.getLogger(__name__)
@@ -63,8 +63,13 @@ def _to_world(tree: TransformTree, frame: str, points: np.ndarray) -> np.ndarray
 def render_preview(
     recording: Sequence[Path] | Path, output: Path, *, max_frames: int | None = None, fps: float | None = None,
     height_px: int = 480, progress: Callable[[int, int], None] | None = None,
+    tracks: Sequence[TrackState] | None = None,
 ) -> PreviewResult:
-    """Write a preview video of ``recording`` to ``output`` (``.mp4`` or ``.avi``)."""
+    """Write a preview video of ``recording`` to ``output`` (``.mp4`` or ``.avi``).
+
+    ``tracks`` (world frame, or the laser frame for a recording without poses) are drawn as filled
+    squares with their id and a short trail, on top of the ground truth's open circles.
+    """
     paths = [recording] if isinstance(recording, Path | str) else list(recording)
     with Recording(paths) as rec:
         topics = rec.topics()
@@ -98,7 +103,7 @@ def render_preview(
             span = topics[primary].duration_s
             fps = (topics[primary].count - 1) / span if span > 0 and topics[primary].count > 1 else 10.0
         frames = _frames(stream, primary, laser_topics, tree, view, background, height_px, total, progress,
-                         {t: rec.sensor_of(t) for t in topics})
+                         {t: rec.sensor_of(t) for t in topics}, _TrackCursor(tracks or []))
         n = write_video(output, frames, fps=min(max(fps, 1.0), 60.0))
     if n == 0:
         raise RecordingError(f"{', '.join(map(str, paths))}: no frame of {primary} to draw")
@@ -106,9 +111,29 @@ def render_preview(
                          (view.size_px[0], view.size_px[1]))
 
 
+class _TrackCursor:
+    """The track states to draw at a time: each track's latest state at or before it, with a trail."""
+
+    def __init__(self, states: Sequence[TrackState], trail_s: float = 2.0) -> None:
+        self.states = sorted(states, key=lambda s: s.t_ns)
+        self.times = np.array([s.t_ns for s in self.states], np.int64)
+        self.trail_ns = int(trail_s * 1e9)
+
+    def at(self, t_ns: int) -> list[list[TrackState]]:
+        if not self.states:
+            return []
+        hi = int(np.searchsorted(self.times, t_ns, side="right"))
+        lo = int(np.searchsorted(self.times, t_ns - self.trail_ns, side="left"))
+        by_id: dict[int, list[TrackState]] = {}
+        for s in self.states[lo:hi]:
+            by_id.setdefault(s.track_id, []).append(s)
+        step = 2 * int(np.median(np.diff(self.times[self.times > 0]))) if len(self.times) > 1 else 0
+        return [trail for trail in by_id.values() if t_ns - trail[-1].t_ns <= max(step, 100_000_000)]
+
+
 def _frames(stream: Iterator, primary: str, laser_topics: list[str], tree: TransformTree, view: BirdseyeView,
             background: np.ndarray, height_px: int, total: int, progress: Callable[[int, int], None] | None,
-            sensor_of: dict[str, str]) -> Iterator[np.ndarray]:
+            sensor_of: dict[str, str], tracks: _TrackCursor) -> Iterator[np.ndarray]:
     primary_sensor = sensor_of[primary]
     laser_sensors = [sensor_of[t] for t in laser_topics]
     scans: dict[str, np.ndarray] = {}
@@ -128,7 +153,7 @@ def _frames(stream: Iterator, primary: str, laser_topics: list[str], tree: Trans
                 (isinstance(msg, Image) and msg.encoding == "mono16"):
             continue
         yield _compose(view, background, scans, laser_sensors, truth, tree, image, height_px,
-                       (msg.t_ns - t_first) / 1e9)
+                       (msg.t_ns - t_first) / 1e9, tracks.at(msg.t_ns))
         n += 1
         if progress is not None:
             progress(n, total)
@@ -138,7 +163,7 @@ def _frames(stream: Iterator, primary: str, laser_topics: list[str], tree: Trans
 
 def _compose(view: BirdseyeView, background: np.ndarray, scans: dict[str, np.ndarray], lasers: list[str],
              truth: GroundTruth | None, tree: TransformTree, image: Image | None, height_px: int,
-             t_s: float) -> np.ndarray:
+             t_s: float, trails: list[list[TrackState]] | None = None) -> np.ndarray:
     img = background.copy()
     for i, name in enumerate(lasers):
         if name in scans:
@@ -156,6 +181,14 @@ def _compose(view: BirdseyeView, background: np.ndarray, scans: dict[str, np.nda
             if feet is not None and np.all(np.isfinite(feet[k])):
                 for f in view.to_pixels(_to_world(tree, truth.frame_id, np.asarray(feet[k]).reshape(2, 2))):
                     cv2.circle(img, (int(f[0]), int(f[1])), 2, colour, -1)
+    for trail in trails or []:
+        colour = id_colour(trail[-1].track_id + 7)
+        uv = view.to_pixels(np.array([s.position_m for s in trail]))
+        cv2.polylines(img, [uv.astype(np.int32).reshape(-1, 1, 2)], False, colour, 1, cv2.LINE_AA)
+        u, v = int(uv[-1, 0]), int(uv[-1, 1])
+        cv2.rectangle(img, (u - 4, v - 4), (u + 4, v + 4), colour, -1)
+        cv2.putText(img, f"T{trail[-1].track_id}", (u + 6, v + 12), cv2.FONT_HERSHEY_SIMPLEX, 0.4, colour, 1,
+                    cv2.LINE_AA)
     view.label(img, f"{t_s:7.2f} s")
     if image is None:
         return img

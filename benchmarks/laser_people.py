@@ -1,0 +1,198 @@
+"""Laser people tracking end to end (issue 4): our walking-model particle-filter tracker against the
+constant-velocity Kalman + Hungarian baseline on the same laser detections.
+
+Tables, all measured in this process, one run after another (no parallel load on the timings):
+
+1. simulated ``crowd`` and ``groups``, 3 seeds each: MOTA (all frames, and after the first 3 s in which the
+   detector learns the background and nothing can be detected), IDF1, HOTA, ID switches, FP, FN, and the
+   median / p95 time per scan of the tracker step alone and of detector + tracker;
+2. situation detection of the PF tracker against the simulator's truth events
+   (:func:`fusiontrack.sim.situations.situation_events`, scored by :func:`fusiontrack.eval.situation_accuracy`
+   with the identity map of the MOTA evaluation): per kind, true events, detected, false alarms;
+3. scaling: time per scan for 5-80 people (``agents.mean_present``) in the ``crowd`` hall;
+4. the real outdoor bag of leg_tracker (one annotated person, 720 s, laser frame, 10 Hz): MOTA with the
+   annotators' 0.75 m threshold, on the annotated scans (annotations after scan k belong to scan k).
+
+    .venv/bin/python benchmarks/laser_people.py [--seeds 0 1 2] [--crowd-seconds 60] [--groups-seconds 40]
+        [--scaling 5 10 20 40 80] [--scaling-seconds 20] [--skip-scaling] [--skip-outdoor]
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from fusiontrack.eval import evaluate_floor, situation_accuracy
+from fusiontrack.io.recording import Recording
+from fusiontrack.io.sync import with_time
+from fusiontrack.sim.scenario import load_scenario
+from fusiontrack.sim.simulator import Simulation, simulate
+from fusiontrack.sim.situations import EVENT_KINDS, situation_events
+from fusiontrack.tracking.tracker import track_recording
+from fusiontrack.types import GroundTruth, LaserScan
+
+ROOT = Path(__file__).resolve().parents[1]
+OUTDOOR_ZIP = ROOT.parent / "shared/data/laser/leg_tracker_outdoor/person_following_outdoor_1.bag.zip"
+WARMUP_S = 3.0
+SIM_PF = {"lateral_m": 0.2}  # the simulator's feet are 0.2 m apart side by side
+# The outdoor bag: a scanner on a robot following a person through clutter. Segments of fewer than 10 points
+# are far-away clutter (the followed person, 0.7-2.7 m away, gives 10-45 points). The scanner moves, so the
+# covered area cannot be read off its background: no edge (every birth and death is an interior one).
+OUTDOOR_DETECTOR = {"min_segment_points": 10}
+
+
+def _ms(values: list[float], skip: int = 0) -> tuple[float, float]:
+    a = np.asarray(values[skip:] or values) * 1e3
+    return float(np.median(a)), float(np.percentile(a, 95))
+
+
+def run_sim(name: str, seconds: float, seed: int, tmp: Path, settings: dict[str, Any] | None = None,
+            trackers: tuple[str, ...] = ("pf", "kalman")) -> dict[str, Any]:
+    scenario = load_scenario(name).with_overrides(seconds=seconds, seed=seed,
+                                                  settings={"cameras": [], **(settings or {})})
+    path = tmp / f"{name}_{seed}_{int(seconds)}_{len(settings or {})}_{hash(str(settings)) & 0xffff}"
+    sim = simulate(scenario, path)
+    bounds = Simulation(scenario).world.bounds_m
+    corrections = {c.name: -round(c.clock_offset_ms * 1e6) for c in scenario.config.lasers}
+    with Recording(path) as rec:
+        gt = list(rec.messages(["/ground_truth"]))
+    t_warm = gt[0].t_ns + round(WARMUP_S * 1e9)
+    truth_events = situation_events(gt, bounds)
+    n_scans = sum(sim.messages.get(c.name, 0) for c in scenario.config.lasers)
+    out: dict[str, Any] = {"mean_present": sim.mean_present, "scans": n_scans}
+    for trk in trackers:
+        timings: dict[str, list[float]] = {}
+        states, events = track_recording(path, tracker=trk, params=SIM_PF if trk == "pf" else None,
+                                         area_m=bounds, clock_corrections_ns=corrections, timings=timings)
+        m = evaluate_floor(gt, states, 0.5)
+        warm = evaluate_floor([g for g in gt if g.t_ns >= t_warm], [s for s in states if s.t_ns >= t_warm - 20_000_000],
+                              0.5)
+        skip = len(timings["track_s"]) // 10  # timings once the backgrounds are learnt and tracks exist
+        total = [a + b for a, b in zip(timings["detect_s"], timings["track_s"], strict=True)]
+        out[trk] = {"m": m, "warm": warm, "track_ms": _ms(timings["track_s"], skip), "total_ms": _ms(total, skip),
+                    "situations": situation_accuracy(truth_events, events, id_map=m.id_map)}
+    return out
+
+
+def outdoor(tmp: Path) -> dict[str, Any]:
+    with zipfile.ZipFile(OUTDOOR_ZIP) as zf:
+        zf.extractall(tmp / "outdoor")
+    (bag,) = (tmp / "outdoor").glob("**/*.bag")
+    gt: list[GroundTruth] = []
+    last = None
+    with Recording(bag) as rec:  # the annotators' rule: the Person messages after scan k belong to scan k
+        for msg in rec.messages(["/scan_base2", "/ground_truth_people_tracks"], time_source="log"):
+            if isinstance(msg, LaserScan):
+                last = msg.t_ns
+            elif last is not None:
+                gt.append(with_time(msg, last))
+    out = {"annotated": len(gt)}
+    for trk in ("pf", "kalman"):
+        timings: dict[str, list[float]] = {}
+        states, _ = track_recording(bag, tracker=trk, topics=["/scan_base2"], time_source="log", area_m=None,
+                                    detector_params=OUTDOOR_DETECTOR, timings=timings)
+        total = [a + b for a, b in zip(timings["detect_s"], timings["track_s"], strict=True)]
+        out[trk] = {"m": evaluate_floor(gt, states, 0.75), "track_ms": _ms(timings["track_s"]),
+                    "total_ms": _ms(total)}
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--crowd-seconds", type=float, default=60.0)
+    parser.add_argument("--groups-seconds", type=float, default=40.0)
+    parser.add_argument("--scaling", type=int, nargs="+", default=[5, 10, 20, 40, 80])
+    parser.add_argument("--scaling-seconds", type=float, default=20.0)
+    parser.add_argument("--skip-scaling", action="store_true")
+    parser.add_argument("--skip-outdoor", action="store_true")
+    args = parser.parse_args()
+    console = Console(width=200)
+    t_start = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp_name:
+        tmp = Path(tmp_name)
+        results = {(name, seed): run_sim(name, secs, seed, tmp)
+                   for name, secs in (("crowd", args.crowd_seconds), ("groups", args.groups_seconds))
+                   for seed in args.seeds}
+
+        table = Table(title=f"laser people tracking, simulated (crowd {args.crowd_seconds:g} s, groups "
+                            f"{args.groups_seconds:g} s; 2 scanners x 25 Hz; match 0.5 m)", header_style="bold")
+        for col in ("scenario", "seed", "people", "tracker", "MOTA", f"MOTA after {WARMUP_S:g} s", "IDF1", "HOTA",
+                    "IDSW", "FP", "FN", "track ms med / p95", "detect+track ms med / p95"):
+            table.add_column(col, justify="left" if col in ("scenario", "tracker") else "right")
+        for (name, seed), r in results.items():
+            for trk in ("pf", "kalman"):
+                m, w = r[trk]["m"], r[trk]["warm"]
+                table.add_row(name, str(seed), f"{r['mean_present']:.1f}", "PF (ours)" if trk == "pf" else "CV Kalman",
+                              f"{m.mota:.3f}", f"{w.mota:.3f}", f"{m.idf1:.3f}", f"{m.hota:.3f}", str(m.id_switches),
+                              str(m.fp), str(m.fn), "{:.2f} / {:.2f}".format(*r[trk]["track_ms"]),
+                              "{:.2f} / {:.2f}".format(*r[trk]["total_ms"]))
+        for name in ("crowd", "groups"):
+            for trk in ("pf", "kalman"):
+                rs = [r[trk] for (n, _), r in results.items() if n == name]
+
+                def mean(key: str, attr: str, rs: list = rs) -> str:
+                    return f"{np.mean([getattr(x[key], attr) for x in rs]):.3f}"
+
+                table.add_row(name, "mean", "", "PF (ours)" if trk == "pf" else "CV Kalman",
+                              mean("m", "mota"), mean("warm", "mota"), mean("m", "idf1"), mean("m", "hota"),
+                              str(sum(x["m"].id_switches for x in rs)), "", "",
+                              f"{np.mean([x['track_ms'][0] for x in rs]):.2f}",
+                              f"{np.mean([x['total_ms'][0] for x in rs]):.2f}", style="bold")
+        console.print(table)
+
+        sit = Table(title="situation detection, PF tracker vs the simulator's truth events (detected / true, "
+                          "false alarms), summed over the seeds", header_style="bold")
+        sit.add_column("scenario")
+        for kind in EVENT_KINDS:
+            sit.add_column(kind, justify="right")
+        for name in ("crowd", "groups"):
+            row = [name]
+            for kind in EVENT_KINDS:
+                scores = [r["pf"]["situations"][kind] for (n, _), r in results.items() if n == name]
+                true, hit = sum(s.true for s in scores), sum(s.detected for s in scores)
+                fa = sum(s.false_alarms for s in scores)
+                row.append(f"{hit}/{true} ({100 * hit / max(true, 1):.0f} %), FA {fa}")
+            sit.add_row(*row)
+        console.print(sit)
+
+        if not args.skip_scaling:
+            scale = Table(title=f"scaling: crowd hall, {args.scaling_seconds:g} s, seed {args.seeds[0]}, 2 scanners",
+                          header_style="bold")
+            for col in ("people set", "mean present", "PF track ms med / p95", "PF ms per person",
+                        "PF detect+track ms med", "PF MOTA", "Kalman track ms med", "Kalman MOTA"):
+                scale.add_column(col, justify="right")
+            for n in args.scaling:
+                r = run_sim("crowd", args.scaling_seconds, args.seeds[0], tmp, {"agents.mean_present": n})
+                pf, kf = r["pf"], r["kalman"]
+                scale.add_row(str(n), f"{r['mean_present']:.1f}", "{:.2f} / {:.2f}".format(*pf["track_ms"]),
+                              f"{pf['track_ms'][0] / max(r['mean_present'], 1e-9):.3f}", f"{pf['total_ms'][0]:.2f}",
+                              f"{pf['m'].mota:.3f}", f"{kf['track_ms'][0]:.2f}", f"{kf['m'].mota:.3f}")
+            console.print(scale)
+
+        if not args.skip_outdoor:
+            r = outdoor(tmp)
+            od = Table(title=f"real data: leg_tracker person_following_outdoor_1 (/scan_base2, 10 Hz, laser frame; "
+                             f"{r['annotated']} annotated scans; match 0.75 m)", header_style="bold")
+            for col in ("tracker", "MOTA", "IDF1", "IDSW", "FP", "FN", "track ms med / p95",
+                        "detect+track ms med / p95"):
+                od.add_column(col, justify="left" if col == "tracker" else "right")
+            for trk in ("pf", "kalman"):
+                m = r[trk]["m"]
+                od.add_row("PF (ours)" if trk == "pf" else "CV Kalman", f"{m.mota:.3f}", f"{m.idf1:.3f}",
+                           str(m.id_switches), str(m.fp), str(m.fn), "{:.2f} / {:.2f}".format(*r[trk]["track_ms"]),
+                           "{:.2f} / {:.2f}".format(*r[trk]["total_ms"]))
+            console.print(od)
+    console.print(f"total {time.perf_counter() - t_start:.0f} s")
+
+
+if __name__ == "__main__":
+    main()

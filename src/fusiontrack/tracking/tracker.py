@@ -1,0 +1,1420 @@
+"""The laser people tracker of seed 001: one stateful object that strings the tracking maths together.
+
+:class:`LaserPeopleTracker` owns every array of a run and its own integer track ids. Each call of
+:meth:`LaserPeopleTracker.step` takes the laser detections of one instant (world frame, from
+:class:`fusiontrack.laser.LaserPeopleDetector`) and returns one :class:`~fusiontrack.types.TrackState`
+per confirmed live track; the situation events of the step are in :attr:`LaserPeopleTracker.events`.
+The step follows ARCHITECTURE.md's "Tracker step" (ALGORITHMS.md sections in brackets):
+
+1. **predict** — all walking targets at once, ``(n_targets, n_particles, 8)`` particles: the two-feet
+   walking model, or the random walk for people standing still [B8]; merged targets by a
+   constant-velocity Kalman filter on their segment centre [B17, X5];
+2. **gate** — ``D_kj`` between every predicted centre (particle mean of the feet midpoint) and every
+   detection centre, association states ``c``/``r`` [B6];
+3. **situations** — B7's rules for every target and detection, every frame [B7];
+4. **update** — each walking target's detection is its nearest gated one (B10), made one-to-one with
+   the Hungarian algorithm when two targets want the same detection (X2; the laser-only stand-in for
+   B16's score map of correlated targets); particles are weighted by the laser likelihood (feet to
+   segment × walking pattern) [B9] and resampled every frame [X1, B10]. A target that found nothing may
+   take an unclaimed detection within a gate that grows while it coasts (re-acquisition, instead of a new
+   identity after an occlusion). A tenth of each walking target's particles get their heading redrawn
+   about the track's velocity every step, so that the filter follows turns (B8's heading noise alone is
+   3° per frame);
+5. **merge / split** — targets that share one detection become one merged target [B7 rule 1, B17]: a
+   constant-velocity Kalman filter on the segment centre, holding every member's id, gait snapshot
+   (T, S, ψ), body position and velocity. Inside it each member is predicted with a velocity that relaxes
+   to the group's and corrected, with small alpha-beta gains, towards the mean of the segment points
+   nearest to it (k-means from the predictions; members kept ``member_min_gap_m`` apart); a merged target
+   gates detections with each of its members. When it sees two or more detections each found by it alone
+   (B7 rule 2), at least ``split_min_m`` apart, for ``n_split`` frames, it splits and the members are
+   recovered *by motion*: their predicted positions are assigned to the detections by the Hungarian
+   algorithm [X2] and each recovered member's particle filter restarts at its detection with its
+   pre-merge T, S and ψ (members left over stay merged). A merged target whose segments show at most two
+   leg blobs for ``single_s`` seconds holds one person: the member nearest to it goes on, the others end;
+6. **lifecycle** — unclaimed detections become candidates, confirmed after ``n_confirm`` frames on the edge
+   of the covered area or ``n_confirm_interior`` inside it; a target with no detection coasts, and ends
+   after ``n_miss_edge`` frames on the edge (once it is ``edge_min_age_s`` old) or ``n_miss`` frames
+   elsewhere [B7]. Standing people switch to the random-walk model (B8, :func:`update_standing`) from the
+   speed of the estimated body position.
+
+The output position of a walking target is the particle mean of the feet midpoint (B10), of a merged
+member its own body position; velocities come from the estimated positions (time constant
+``velocity_tau_s``).
+
+Frame counts and time
+---------------------
+B7 counts frames of seed 001's integrated 25 Hz stream. The tracker is stepped once per laser scan, so
+with two scanners at 25 Hz it runs at 50 Hz, and on a 10 Hz bag at 10 Hz. Every count ``N`` is therefore
+taken as ``N · frame_s`` seconds of the tracker's own clock (``frame_s`` = 40 ms): "seen for ``N_confirm``
+frames" means "seen without a gap for ``(N_confirm - 1) · frame_s`` seconds, in at least two steps", and
+"missing for ``N_miss`` frames" means "no detection for ``N_miss · frame_s`` seconds". Process noise is
+scaled the same way (``dt_ref_s = frame_s``).
+
+Events
+------
+``Event.kind`` is one of ``merge``, ``split`` (``track_ids`` = the members), ``correlated`` (one per
+track and run of correlated steps, gaps up to ``correlated_gap_s`` bridged, emitted when the run ends),
+``appear`` (a track born from a candidate first seen on the edge; ``t_ns`` = first seen, ``t_end_ns`` =
+confirmation), ``disappear`` (a track ended on the edge; ``t_ns`` = last detection, ``t_end_ns`` = the
+end), and two kinds that seed 001 does not score: ``born`` (a track confirmed inside the area) and
+``lost`` (a track ended by ``N_miss`` inside the area, or a member dropped from a merged target that held
+one person). Events carry their own times and may be reported a step or more after them (a correlated
+run when it ends). Call :meth:`LaserPeopleTracker.finish` at the end of a run for the events still open.
+
+Situations of the states: B7's label of the target (:data:`~fusiontrack.tracking.situations.SITUATION_OF_LABEL`;
+coasting is ``noncorrelated``), ``appearing`` for ``appear_window_s`` after a birth on the edge, ``merged``
+for the members of a merged target.
+
+Also here: :func:`track_recording`, which builds the detector from a recording's laser topics and
+``/tf_static`` and runs a tracker over it, and :func:`area_from_backgrounds`, the covered area inferred
+from what the scanners see. The constant-velocity Kalman baseline is
+:class:`fusiontrack.tracking.baseline.CVKalmanTracker`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import logging
+import math
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..types import Detection, Event, ObjectClass, Situation, TrackState
+from . import kalman
+from .association import association_states, gate_distances, hungarian
+from .likelihood import laser_log_likelihood
+from .pf import resample_where, reweight, standard_normal
+from .situations import SITUATION_OF_LABEL, TargetLabel, classify_situations, on_edge
+from .walking import (
+    PERIOD,
+    PSI,
+    STRIDE,
+    STRIDE_RANGE_M,
+    StandingNoise,
+    WalkingNoise,
+    init_walking,
+    predict_people,
+    update_standing,
+)
+
+__all__ = [
+    "CandidateSet",
+    "DetectionArrays",
+    "LaserPeopleTracker",
+    "TrackerParams",
+    "area_from_backgrounds",
+    "area_polygon",
+    "count_blobs",
+    "detection_arrays",
+    "track_recording",
+]
+
+log = logging.getLogger(__name__)
+
+_SITUATION_NAMES = {int(label): str(sit) for label, sit in SITUATION_OF_LABEL.items()}
+_APPEARING, _MERGED_S = str(Situation.APPEARING), str(Situation.MERGED)
+_DISAPPEARING_S, _NONCORRELATED_S = str(Situation.DISAPPEARING), str(Situation.NONCORRELATED)
+_NONCORRELATED, _CORRELATED = int(TargetLabel.NONCORRELATED), int(TargetLabel.CORRELATED)
+_MERGING, _MERGED, _SPLITTING = int(TargetLabel.MERGING), int(TargetLabel.MERGED), int(TargetLabel.SPLITTING)
+_COASTING, _DISAPPEARING = int(TargetLabel.COASTING), int(TargetLabel.DISAPPEARING)
+
+
+# --------------------------------------------------------------------------------------------------
+# Parameters
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TrackerParams:
+    """Every parameter of :class:`LaserPeopleTracker` (ALGORITHMS.md defaults; RECON where marked).
+
+    Attributes
+    ----------
+    n_particles : int
+        Particles per target (B10: 100).
+    bandwidth_m, gate : float
+        B6's gate: ``σ_x = σ_y = h`` (0.40 m) and ``G = 4``, a circle of radius 2h.
+    d_edge_m : float
+        Width of the edge band of the covered area (B7: 0.5 m).
+    frame_s : float
+        Duration of one of B7's frames (40 ms, 25 Hz); the frame counts below are multiples of it.
+    n_confirm, n_confirm_interior, n_miss : int
+        B7: 3 frames on the edge, 10 inside, 25 frames of coasting.
+    n_miss_edge : int
+        Frames without a detection on the edge before a target disappears (B7 says at once; 3 frames of
+        grace keep a target whose feet blink out for one scan near a wall) [RECON].
+    edge_min_age_s : float
+        A target younger than this does not disappear on the edge (it coasts as inside): people seen in a
+        doorway flicker in and out of view as they come in [RECON].
+    n_split : int
+        Frames the split condition must hold before a merged target splits (hysteresis: two people side by
+        side are one segment in one scan and two in the next; gaps up to ``candidate_gap_s`` do not restart
+        the count) [RECON].
+    split_min_m : float
+        ... and the two farthest of its detections must be at least this far apart (the simulator's truth
+        calls people closer than 0.6 m merged) [RECON].
+    candidate_gate_m, candidate_gap_s : float
+        A candidate takes the nearest unclaimed detection within this distance, and is dropped after this
+        long without one [RECON].
+    sigma_f_m, sigma_w_m, sigma_f_one_m, kappa, lateral_m : float
+        B9's likelihood; ``lateral_m`` is the side-by-side distance of the feet (0 in B8; 0.2 m for the
+        simulator's walkers).
+    walking_noise, standing_noise : WalkingNoise, StandingNoise
+        Process noise (B8 values per 40 ms frame, scaled with ``sqrt(Δt / frame_s)``).
+    standing_speed_mps, standing_frames, resume_speed_mps :
+        B8's standing switch (:func:`~fusiontrack.tracking.walking.update_standing`); frames are steps.
+    velocity_tau_s : float
+        Time constant of the track velocity estimate (from the estimated body positions) [RECON].
+    init_feet_sigma_m, init_heading_sigma_rad, init_period_sigma_s, init_stride_sigma_m : float
+        Spread of a new target's particles around B8's initialisation [RECON].
+    merged_q, merged_r_m : float
+        Constant-velocity Kalman filter of a merged target: ``q`` (m²/s³) and the σ of its centre (m) [X5].
+    member_tau_s : float
+        How long a member's velocity relative to its merged target is extrapolated (decay time) [RECON].
+    member_alpha, member_beta : float
+        Gains of the alpha-beta filter that follows each member inside a merged target: the member's
+        predicted position is moved by ``alpha`` times, and its velocity by ``beta / Δt`` times, the residual
+        to the mean of the segment points nearest to it (k-means over the merged segment) [RECON].
+    member_min_gap_m : float
+        Members of a merged target are kept at least this far apart [RECON].
+    blob_radius_m : float
+        Leg blobs: the points of a segment linked by distances below this. A segment of one person shows at
+        most two; a merged target whose segments show at most two for ``single_s`` seconds holds one person (the
+        member nearest to it goes on as a walking target, the others end as ``lost``), and a candidate whose
+        segment shows three or more in ``multi_fraction`` of its frames is born as a merged target of two
+        people (three for five or more blobs; ``multi_fraction=None``, the default, switches this off: on the
+        simulated crowds it did not pay) [RECON].
+    multi_fraction, single_s : float or None
+        See ``blob_radius_m``.
+    reacquire_speed_mps, reacquire_max_m : float
+        A target that found no detection may take an unclaimed detection (found by nobody) within
+        ``2h + reacquire_speed_mps · t_missing`` (at most ``reacquire_max_m``) instead of losing it to a
+        new track: its particles restart there with its gait [RECON].
+    reseed_fraction : float
+        Fraction of a walking target's particles whose heading is redrawn about the track's velocity each
+        step (keeps up with turns; 0 = pure B8) [RECON].
+    max_dt_s : float
+        Longest prediction step; a longer gap (every scanner silent) is predicted as this [RECON].
+    correlated_gap_s, min_correlated_s : float
+        Gaps in a correlated run up to this long are bridged (one event); shorter runs than
+        ``min_correlated_s`` (default 0: every run) make no event [RECON].
+    split_hold_s : float
+        A ``split`` event is held back this long, and dropped (with the merge that undoes it) when the same
+        people merge again in the meantime: one segment that flickers into two is no split. Off (0) by
+        default: on the simulated crowds 1 s cut the false merge/split alarms by ~4x but also halved the true
+        ones detected [RECON].
+    appear_window_s : float
+        A target born on the edge is reported ``appearing`` for this long.
+    sensor : str
+        ``TrackState.sensor``, ``Event.sensor`` and what ``TrackState.sensors`` names when a detection
+        confirmed the track.
+    """
+
+    n_particles: int = 100
+    bandwidth_m: float = 0.40
+    gate: float = 4.0
+    d_edge_m: float = 0.5
+    frame_s: float = 0.04
+    n_confirm: int = 3
+    n_confirm_interior: int = 10
+    n_miss: int = 25
+    n_miss_edge: int = 3
+    edge_min_age_s: float = 1.0
+    n_split: int = 5
+    candidate_gate_m: float = 0.5
+    candidate_gap_s: float = 0.25
+    sigma_f_m: float = 0.10
+    sigma_w_m: float = 0.10
+    sigma_f_one_m: float = 0.15
+    kappa: float = 1.0 / math.pi
+    lateral_m: float = 0.0
+    walking_noise: WalkingNoise = field(default_factory=lambda: WalkingNoise(dt_ref_s=0.04))
+    standing_noise: StandingNoise = field(default_factory=lambda: StandingNoise(dt_ref_s=0.04))
+    standing_speed_mps: float = 0.1
+    standing_frames: int = 10
+    resume_speed_mps: float = 0.2
+    velocity_tau_s: float = 0.3
+    init_feet_sigma_m: float = 0.03
+    init_heading_sigma_rad: float = 0.3
+    init_period_sigma_s: float = 0.1
+    init_stride_sigma_m: float = 0.15
+    merged_q: float = 1.0
+    merged_r_m: float = 0.08
+    member_tau_s: float = 1.0
+    member_alpha: float = 0.2
+    member_min_gap_m: float = 0.35
+    split_min_m: float = 0.6
+    blob_radius_m: float = 0.15
+    single_s: float = 2.0
+    multi_fraction: float | None = None
+    member_beta: float = 0.02
+    reacquire_speed_mps: float = 1.0
+    reacquire_max_m: float = 2.0
+    reseed_fraction: float = 0.1
+    max_dt_s: float = 0.5
+    correlated_gap_s: float = 0.4
+    min_correlated_s: float = 0.0
+    split_hold_s: float = 0.0
+    appear_window_s: float = 1.0
+    sensor: str = "laser"
+
+    def __post_init__(self) -> None:
+        positive = ("bandwidth_m", "gate", "frame_s", "candidate_gate_m", "candidate_gap_s", "sigma_f_m",
+                    "sigma_w_m", "sigma_f_one_m", "velocity_tau_s", "merged_r_m", "member_tau_s", "max_dt_s",
+                    "member_alpha")
+        for name in positive:
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+                raise ConfigError(f"tracker parameter {name}: expected a finite value > 0, got {v!r}")
+        non_negative = ("d_edge_m", "kappa", "lateral_m", "standing_speed_mps", "resume_speed_mps",
+                        "init_feet_sigma_m", "init_heading_sigma_rad", "init_period_sigma_s", "init_stride_sigma_m",
+                        "merged_q", "correlated_gap_s", "appear_window_s", "member_beta", "member_min_gap_m",
+                        "split_min_m", "blob_radius_m", "single_s", "reacquire_speed_mps", "min_correlated_s",
+                        "split_hold_s", "reacquire_max_m", "edge_min_age_s")
+        for name in non_negative:
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
+                raise ConfigError(f"tracker parameter {name}: expected a finite value >= 0, got {v!r}")
+        for name in ("n_particles", "n_confirm", "n_confirm_interior", "n_miss", "n_miss_edge", "n_split",
+                     "standing_frames"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
+                raise ConfigError(f"tracker parameter {name}: expected an integer >= 1, got {v!r}")
+        if self.multi_fraction is not None and not 0.0 <= self.multi_fraction <= 1.0:
+            raise ConfigError(f"tracker parameter multi_fraction: expected 0..1 or None, got {self.multi_fraction!r}")
+        if not 0.0 <= self.reseed_fraction <= 1.0:
+            raise ConfigError(f"tracker parameter reseed_fraction: expected 0..1, got {self.reseed_fraction!r}")
+
+    def replace(self, **changes: Any) -> TrackerParams:
+        """A copy with some fields changed (unknown names are a :class:`ConfigError`)."""
+        names = {f.name for f in dataclasses.fields(self)}
+        unknown = sorted(set(changes) - names)
+        if unknown:
+            raise ConfigError(f"unknown tracker parameter(s) {', '.join(unknown)}; known: {', '.join(sorted(names))}")
+        return dataclasses.replace(self, **changes)
+
+
+def _params(params: TrackerParams | Mapping[str, Any] | None, overrides: Mapping[str, Any]) -> TrackerParams:
+    base = TrackerParams() if params is None else params
+    if isinstance(base, Mapping):
+        base = TrackerParams().replace(**base)
+    if not isinstance(base, TrackerParams):
+        raise ConfigError(f"params: expected TrackerParams, a mapping or None, got {type(base).__name__}")
+    return base.replace(**overrides) if overrides else base
+
+
+def _rng(rng: np.random.Generator | int | None) -> np.random.Generator:
+    return rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+
+
+def area_polygon(area_m: Any) -> np.ndarray | None:
+    """The covered area as polygon vertices ``(m, 2)``: from a rectangle ``(x_min, y_min, x_max, y_max)``,
+    from vertices ``(m >= 3, 2)``, or ``None`` (no boundary: every place is interior)."""
+    if area_m is None:
+        return None
+    a = np.asarray(area_m, dtype=np.float64)
+    if a.shape == (4,):
+        x0, y0, x1, y1 = a
+        if not (x1 > x0 and y1 > y0):
+            raise ConfigError(f"area: expected a rectangle (x_min, y_min, x_max, y_max), got {a.tolist()}")
+        a = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+    if a.ndim != 2 or a.shape[1] != 2 or a.shape[0] < 3 or not np.all(np.isfinite(a)):
+        raise ConfigError(f"area: expected a rectangle (4,) or polygon vertices (m >= 3, 2), got shape {a.shape}")
+    a = a.copy()
+    a.setflags(write=False)
+    return a
+
+
+# --------------------------------------------------------------------------------------------------
+# Detections as arrays
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class DetectionArrays:
+    """The laser detections of one step as arrays: ``centres (n, 2)``, ``feet (n, 2, 2)``, ``inter_feet (n,)``,
+    ``one_foot (n,)``, and ``points`` (each detection's ``points_m`` feature ``(k, 2)``, or ``None``). A detection
+    without feet features has both feet at its centre (one foot)."""
+
+    centres: np.ndarray
+    feet: np.ndarray
+    inter_feet: np.ndarray
+    one_foot: np.ndarray
+    points: tuple[np.ndarray | None, ...] = ()
+
+    def __len__(self) -> int:
+        return int(self.centres.shape[0])
+
+
+def detection_arrays(detections: Sequence[Detection]) -> DetectionArrays:
+    """Pack floor detections; detections without ``position_m`` or with non-finite values are left out.
+
+    ``inter_feet_m`` defaults to the distance of the two feet and ``one_foot`` to ``False``; a detection
+    without ``feet_m`` is one foot at its centre; a non-finite ``inter_feet_m`` makes it one foot.
+    """
+    dets = [d for d in detections if d.position_m is not None]
+    k = len(dets)
+    if k == 0:
+        return _NO_DETECTIONS
+    centres = np.array([d.position_m for d in dets])
+    feats = [d.features for d in dets]
+    feet_list = [f.get("feet_m") for f in feats]
+    if all(f is not None and f.shape == (2, 2) for f in feet_list):
+        feet = np.array(feet_list, dtype=np.float64)
+        has_feet = np.ones(k, bool)
+    else:
+        has_feet = np.array([f is not None and f.shape == (2, 2) for f in feet_list])
+        feet = np.array([f if ok else np.stack([c, c]) for f, ok, c in zip(feet_list, has_feet, centres, strict=True)],
+                        dtype=np.float64)
+    inter = np.array([f.get("inter_feet_m", np.nan) for f in feats], dtype=np.float64)
+    one = np.array([f.get("one_foot", False) for f in feats], dtype=bool)
+    missing = np.isnan(inter) & has_feet
+    if missing.any():
+        inter[missing] = np.hypot(*(feet[missing, 0] - feet[missing, 1]).T)
+    one |= ~has_feet | ~np.isfinite(inter)
+    inter = np.where(one, 0.0, inter)
+    points = []
+    for f in feats:
+        pts = f.get("points_m")
+        points.append(pts if pts is not None and pts.ndim == 2 and pts.shape[1] == 2 else None)
+    ok = np.isfinite(centres).all(axis=1) & np.isfinite(feet).all(axis=(1, 2))
+    if ok.all():
+        return DetectionArrays(centres, feet, inter, one, tuple(points))
+    return DetectionArrays(centres[ok], feet[ok], inter[ok], one[ok],
+                           tuple(pt for pt, good in zip(points, ok, strict=True) if good))
+
+
+_NO_DETECTIONS = DetectionArrays(np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0), np.zeros(0, bool), ())
+
+
+# --------------------------------------------------------------------------------------------------
+# Birth candidates (shared with the baseline)
+# --------------------------------------------------------------------------------------------------
+
+
+class CandidateSet:
+    """Tentative targets: unclaimed detections followed from step to step until confirmed or dropped.
+
+    A candidate takes the nearest unclaimed detection within ``gate_m`` (Hungarian, one-to-one) and is
+    dropped once it has gone ``gap_s`` without one. Arrays, one row per candidate: ``first_t``, ``last_t``
+    (ns), ``hits``, ``first_pos``, ``pos`` (m), ``edge`` (first seen on the edge), ``det`` (the detection it
+    took this step, -1 if none).
+    """
+
+    def __init__(self, gate_m: float, gap_s: float) -> None:
+        self.gate_m = float(gate_m)
+        self.gap_ns = round(gap_s * 1e9)
+        self.first_t = np.zeros(0, np.int64)
+        self.last_t = np.zeros(0, np.int64)
+        self.hits = np.zeros(0, np.int64)
+        self.first_pos = np.zeros((0, 2))
+        self.pos = np.zeros((0, 2))
+        self.edge = np.zeros(0, bool)
+        self.det = np.zeros(0, np.int64)
+        self.n_multi = np.zeros(0, np.int64)  # frames whose segment showed >= 3 leg blobs
+        self.n_many = np.zeros(0, np.int64)  # ... >= 5 leg blobs
+
+    _ARRAYS = ("first_t", "last_t", "hits", "first_pos", "pos", "edge", "det", "n_multi", "n_many")
+
+    def __len__(self) -> int:
+        return int(self.hits.size)
+
+    def update(self, t_ns: int, positions: np.ndarray, on_edge_dets: np.ndarray,
+               blobs: np.ndarray | None = None) -> None:
+        """Follow the candidates with the unclaimed detections ``positions (k, 2)``; new ones start candidates.
+
+        ``blobs (k,)``: leg blobs of each detection's segment (optional), counted into ``n_multi``/``n_many``.
+        """
+        k = positions.shape[0]
+        nb = np.zeros(k, np.int64) if blobs is None else np.asarray(blobs, np.int64)
+        n = len(self)
+        self.det = np.full(n, -1, np.int64)
+        taken = np.zeros(k, bool)
+        if n and k:
+            d = np.linalg.norm(self.pos[:, None, :] - positions[None, :, :], axis=2)
+            pairs, _, _ = hungarian(d, gate=self.gate_m)
+            if len(pairs):
+                r, c = pairs[:, 0], pairs[:, 1]
+                self.det[r] = c
+                self.pos[r] = positions[c]
+                self.last_t[r] = t_ns
+                self.hits[r] += 1
+                self.n_multi[r] += nb[c] >= 3
+                self.n_many[r] += nb[c] >= 5
+                taken[c] = True
+        keep = (t_ns - self.last_t) <= self.gap_ns
+        if not keep.all():
+            self._select(keep)
+        new = np.flatnonzero(~taken)
+        if new.size:
+            m = new.size
+            self.first_t = np.concatenate([self.first_t, np.full(m, t_ns, np.int64)])
+            self.last_t = np.concatenate([self.last_t, np.full(m, t_ns, np.int64)])
+            self.hits = np.concatenate([self.hits, np.ones(m, np.int64)])
+            self.first_pos = np.concatenate([self.first_pos, positions[new]])
+            self.pos = np.concatenate([self.pos, positions[new]])
+            self.edge = np.concatenate([self.edge, np.asarray(on_edge_dets, bool)[new]])
+            self.det = np.concatenate([self.det, new.astype(np.int64)])
+            self.n_multi = np.concatenate([self.n_multi, (nb[new] >= 3).astype(np.int64)])
+            self.n_many = np.concatenate([self.n_many, (nb[new] >= 5).astype(np.int64)])
+
+    def _select(self, keep: np.ndarray) -> None:
+        for name in self._ARRAYS:
+            setattr(self, name, getattr(self, name)[keep])
+
+    def ready(self, t_ns: int, need_edge_ns: int, need_interior_ns: int) -> np.ndarray:
+        """Indices of candidates seen this step, for long enough (edge or interior rule), in >= 2 steps."""
+        need = np.where(self.edge, need_edge_ns, need_interior_ns)
+        return np.flatnonzero((self.det >= 0) & (self.hits >= 2) & (t_ns - self.first_t >= need))
+
+    def pop(self, idx: np.ndarray) -> None:
+        keep = np.ones(len(self), bool)
+        keep[idx] = False
+        self._select(keep)
+
+
+# --------------------------------------------------------------------------------------------------
+# Merged targets
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(slots=True)
+class _MemberInfo:
+    """What identity recovery keeps of a target suspended inside a merged target (B17 snapshot)."""
+
+    track_id: int
+    period_s: float
+    stride_m: float
+    heading_rad: float
+    standing: bool
+    born_ns: int
+    born_edge: bool
+
+
+@dataclass(slots=True)
+class _Merged:
+    """A merged target M (B17): a constant-velocity Kalman state on its segment centre, and its members.
+
+    Each member keeps its own body position and velocity (``pos``, ``vel``, ``(m, 2)``), predicted with a
+    velocity that relaxes towards M's and corrected by the segment points nearest to it: that is what
+    identity recovery "by motion" compares with the detections when M splits.
+    """
+
+    x: np.ndarray  # (4,) x, y, vx, vy
+    P: np.ndarray  # (4, 4)
+    seen: int  # time of the last detection
+    pos: np.ndarray  # (m, 2)
+    vel: np.ndarray  # (m, 2)
+    info: list[_MemberInfo]
+    split_since: int = 0  # start of the current run of split conditions (0: none)
+    split_last: int = 0  # last time the split condition held
+    multi_last: int = 0  # last time its segments showed more than one person (>= 3 leg blobs, or 2 segments)
+
+    @property
+    def ids(self) -> list[int]:
+        return [m.track_id for m in self.info]
+
+    def predict(self, dt: float, tau_s: float) -> None:
+        v = self.x[2:4]
+        self.vel = v + (self.vel - v) * math.exp(-dt / tau_s)
+        self.pos = self.pos + self.vel * dt
+
+    def correct(self, points: np.ndarray | None, centre: np.ndarray, dt: float, alpha: float, beta: float,
+                min_gap_m: float, max_step_m: float = 0.3) -> None:
+        """Alpha-beta correction of the members from the segment points (k-means from the predictions), or,
+        without points, by moving them together onto the segment centre. Members closer than ``min_gap_m``
+        are then pushed apart to it: the points of one person must not pull two members onto its two feet."""
+        pred = self.pos
+        m = pred.shape[0]
+        if points is not None and points.shape[0] >= 2 * m:
+            c = pred.copy()
+            for _ in range(2):
+                d2 = ((points[:, None, :] - c[None, :, :]) ** 2).sum(axis=2)
+                lab = np.argmin(d2, axis=1)
+                cnt = np.bincount(lab, minlength=m)
+                sx = np.bincount(lab, points[:, 0], minlength=m)
+                sy = np.bincount(lab, points[:, 1], minlength=m)
+                has = cnt >= 2
+                c[has, 0] = sx[has] / cnt[has]
+                c[has, 1] = sy[has] / cnt[has]
+            res = c - pred
+        else:
+            res = np.broadcast_to(centre - pred.mean(axis=0), pred.shape)
+        norm = np.sqrt((res**2).sum(axis=1, keepdims=True))
+        res = res * np.minimum(1.0, max_step_m / np.maximum(norm, 1e-12))
+        pos = pred + alpha * res
+        if m >= 2 and min_gap_m > 0:
+            for a, b in itertools.combinations(range(m), 2):
+                d = pos[b] - pos[a]
+                n = float(np.hypot(d[0], d[1]))
+                if n < min_gap_m:
+                    u = d / n if n > 1e-9 else np.array([1.0, 0.0])
+                    push = 0.5 * (min_gap_m - n) * u
+                    pos[a] -= push
+                    pos[b] += push
+            res = pos - pred
+        self.pos = pos
+        if dt > 0:
+            self.vel = self.vel + (beta / dt) * res
+
+
+def count_blobs(points: np.ndarray, radius_m: float) -> int:
+    """Number of groups of ``points (k, 2)`` linked by distances below ``radius_m`` (leg blobs of a segment)."""
+    k = points.shape[0]
+    if k <= 1:
+        return k
+    d2 = ((points[:, None, :] - points[None, :, :]) ** 2).sum(axis=2)
+    reach = d2 < radius_m * radius_m
+    a = reach.astype(np.float32)
+    for _ in range(k):  # transitive closure by squaring: log2(k) steps suffice
+        nxt = (a @ a) > 0
+        if (nxt == reach).all():
+            break
+        reach = nxt
+        a = reach.astype(np.float32)
+    return int(np.unique(np.argmax(reach, axis=1)).size)
+
+
+def _max_pair_distance(points: np.ndarray) -> float:
+    if points.shape[0] < 2:
+        return 0.0
+    d = points[:, None, :] - points[None, :, :]
+    return float(np.sqrt((d**2).sum(axis=2).max()))
+
+
+def _fast_state(t_ns: int, sensor: str, track_id: int, position: np.ndarray, velocity: np.ndarray, situation: str,
+                sensors: tuple[str, ...]) -> TrackState:
+    """A :class:`TrackState` built without re-validating values the tracker already guarantees (hot path).
+
+    Equivalent to ``TrackState(t_ns, sensor, track_id, position, velocity, situation=situation,
+    sensors=sensors)`` for an int time and id, finite (2,) float arrays, a valid situation string and a
+    tuple of str: the arrays are copied and made read-only exactly as the constructor does.
+    """
+    st = object.__new__(TrackState)
+    pos = np.array(position, dtype=np.float64)
+    vel = np.array(velocity, dtype=np.float64)
+    pos.setflags(write=False)
+    vel.setflags(write=False)
+    for name, value in (("t_ns", t_ns), ("sensor", sensor), ("track_id", track_id), ("position_m", pos),
+                        ("velocity_mps", vel), ("covariance", None), ("cls", _PERSON), ("situation", situation),
+                        ("sensors", sensors), ("score", 1.0), ("box_px", None), ("camera", "")):
+        object.__setattr__(st, name, value)
+    return st
+
+
+_PERSON = str(ObjectClass.PERSON)
+
+
+# --------------------------------------------------------------------------------------------------
+# The tracker
+# --------------------------------------------------------------------------------------------------
+
+
+class LaserPeopleTracker:
+    """Seed 001's laser people tracker (module docstring): walking-model particle filters, B7's situation
+    switch, merged targets split back by motion, births and deaths at the edge of the covered area.
+
+    Parameters
+    ----------
+    params : TrackerParams or mapping, optional
+        Defaults: :class:`TrackerParams` (ALGORITHMS.md values).
+    area_m : rectangle ``(x_min, y_min, x_max, y_max)`` or polygon ``(m, 2)``, optional
+        The covered area (world frame). ``None``: no edge, every birth and death is an interior one. It
+        may be set later through :attr:`area_m` (e.g. once the scanners' backgrounds are learnt).
+    rng : numpy.random.Generator or int, optional
+        Source of all randomness (particles, resampling).
+    **overrides
+        Any :class:`TrackerParams` field, e.g. ``lateral_m=0.2``.
+
+    Attributes
+    ----------
+    events : list of Event
+        The events of the last :meth:`step`.
+    dropped_steps : int
+        Steps ignored because their time was not after the previous step's (out of order).
+    """
+
+    _WALKING_ARRAYS = ("_x", "_w", "_id", "_seen", "_pos", "_lag", "_vel", "_slow", "_standing", "_born",
+                       "_born_edge")
+
+    def __init__(self, params: TrackerParams | Mapping[str, Any] | None = None, *, area_m: Any = None,
+                 rng: np.random.Generator | int | None = None, **overrides: Any) -> None:
+        self.params = p = _params(params, overrides)
+        self.area_m = area_m
+        self.rng = _rng(rng)
+        self._next_id = itertools.count(1)
+        self._t: int | None = None
+        self.events: list[Event] = []
+        self.dropped_steps = 0
+        n_p = p.n_particles
+        # walking targets, one row each
+        self._x = np.zeros((0, n_p, 8))
+        self._w = np.zeros((0, n_p))
+        self._id = np.zeros(0, np.int64)
+        self._seen = np.zeros(0, np.int64)  # time of the last detection
+        self._pos = np.zeros((0, 2))  # estimated body position
+        self._lag = np.zeros((0, 2))  # lagged body position (velocity estimate)
+        self._vel = np.zeros((0, 2))
+        self._slow = np.zeros(0, np.int64)
+        self._standing = np.zeros(0, bool)
+        self._born = np.zeros(0, np.int64)
+        self._born_edge = np.zeros(0, bool)
+        self._merged: list[_Merged] = []
+        self._cand = CandidateSet(p.candidate_gate_m, p.candidate_gap_s)
+        self._corr: dict[int, list[Any]] = {}  # track id -> [start, last, position]
+        self._held_splits: dict[frozenset[int], Event] = {}
+        self._frame_ns = p.frame_s * 1e9
+        self._sensors = (p.sensor,)
+        self._reseed_at = 0
+
+    # ---------------------------------------------------------------------------------------------
+    @property
+    def area_m(self) -> np.ndarray | None:
+        """The covered area as polygon vertices ``(m, 2)``, or ``None``."""
+        return self._area
+
+    @area_m.setter
+    def area_m(self, value: Any) -> None:
+        self._area = area_polygon(value)
+        self._rect = None
+        a = self._area
+        if a is not None and a.shape == (4, 2):  # an axis-aligned rectangle: a cheaper edge test
+            xs, ys = np.unique(a[:, 0]), np.unique(a[:, 1])
+            if xs.size == 2 and ys.size == 2 and all(
+                    ((a[i, 0] == a[(i + 1) % 4, 0]) != (a[i, 1] == a[(i + 1) % 4, 1])) for i in range(4)):
+                self._rect = (xs[0], ys[0], xs[1], ys[1])
+
+    @property
+    def n_targets(self) -> int:
+        """Live targets: walking targets plus the members of merged targets."""
+        return int(self._id.size) + sum(len(m.info) for m in self._merged)
+
+    def _frames_ns(self, n: int) -> int:
+        return round(n * self._frame_ns)
+
+    def _edge(self, points: np.ndarray) -> np.ndarray:
+        if self._area is None or points.shape[0] == 0:
+            return np.zeros(points.shape[0], bool)
+        if self._rect is not None:
+            x0, y0, x1, y1 = self._rect
+            x, y = points[:, 0], points[:, 1]
+            d = np.minimum(np.minimum(x - x0, x1 - x), np.minimum(y - y0, y1 - y))
+            return d < self.params.d_edge_m
+        return on_edge(points, self._area, self.params.d_edge_m)
+
+    # ---------------------------------------------------------------------------------------------
+    def step(self, t_ns: int, detections: Sequence[Detection]) -> list[TrackState]:
+        """Advance to ``t_ns`` with the laser detections of that instant (world frame).
+
+        Returns one state per confirmed live track; the events of the step are in :attr:`events`. A step
+        whose time is not after the previous one is ignored (counted in :attr:`dropped_steps`; returns
+        ``[]``).
+        """
+        t_ns = int(t_ns)
+        self.events = []
+        if self._t is not None and t_ns <= self._t:
+            self.dropped_steps += 1
+            log.debug("tracker: step at %d ns is not after the previous one (%d ns); ignored", t_ns, self._t)
+            return []
+        dt = 0.0 if self._t is None else min((t_ns - self._t) / 1e9, self.params.max_dt_s)
+        self._t = t_ns
+        det = detection_arrays(detections)
+        self._predict(dt)
+        return self._update(t_ns, dt, det)
+
+    def finish(self) -> list[Event]:
+        """End of a run: the events still held back (correlated runs still open, splits waiting to be sure)."""
+        self.events = []
+        for tid in list(self._corr):
+            self._close_correlated(tid)
+        self.events.extend(self._held_splits.values())
+        self._held_splits.clear()
+        out, self.events = self.events, []
+        return out
+
+    # ---------------------------------------------------------------------------------------------
+    def _predict(self, dt: float) -> None:
+        p = self.params
+        if dt <= 0:
+            return
+        if self._id.size:
+            self._x = predict_people(self._x, self._standing, dt, self.rng, p.walking_noise, p.standing_noise)
+        if self._merged:
+            F, Q = kalman.cv_matrices(dt, p.merged_q)
+            for m in self._merged:
+                m.x = F @ m.x
+                m.P = F @ m.P @ F.T + Q
+                m.predict(dt, p.member_tau_s)
+
+    def _walking_centres(self) -> np.ndarray:
+        x = self._x
+        mid = x[..., 0:2] + x[..., 2:4]
+        return 0.5 * np.einsum("tp,tpk->tk", self._w, mid)
+
+    def _update(self, t_ns: int, dt: float, det: DetectionArrays) -> list[TrackState]:
+        p = self.params
+        merged = self._merged
+        n_w, n_m, n_d = self._id.size, len(merged), len(det)
+        n_t = n_w + n_m
+        cw = self._walking_centres()
+        if n_m:
+            centres = np.concatenate([cw, np.array([m.x[0:2] for m in merged])])
+            D = np.concatenate([gate_distances(cw, det.centres, p.bandwidth_m)]
+                               + [gate_distances(m.pos, det.centres, p.bandwidth_m).min(axis=0, keepdims=True)
+                                  for m in merged])  # a merged target gates with each of its members
+        else:
+            centres = cw
+            D = gate_distances(cw, det.centres, p.bandwidth_m)
+        c, r, found = association_states(D, p.gate)
+        edge_t = self._edge(centres)
+        edge_d = self._edge(det.centres)
+        merged_mask = np.zeros(n_t, bool)
+        merged_mask[n_w:] = True
+        sf = classify_situations(c, r, found, merged_mask, edge_t, edge_d, D)
+        labels = sf.target_labels
+
+        # ---- one detection per target (B10 nearest neighbour, one-to-one by Hungarian when contested)
+        want = (labels == _NONCORRELATED) | (labels == _CORRELATED) | (labels == _MERGED)
+        assigned = np.full(n_t, -1, np.int64)
+        rows = np.flatnonzero(want)
+        if rows.size and n_d:
+            nearest = sf.nearest_det[rows]
+            ok = nearest >= 0
+            if np.unique(nearest[ok]).size == np.count_nonzero(ok):
+                assigned[rows] = nearest
+            else:
+                cost = np.where(found[rows], D[rows], np.inf)
+                pairs, _, _ = hungarian(cost, gate=p.gate)
+                assigned[rows[pairs[:, 0]]] = pairs[:, 1]
+        claimed = r > 0  # found by a target: no birth, unless B7 rule 2 makes it a split candidate
+        if n_d:
+            claimed[sf.split_candidates] = False
+            claimed[assigned[assigned >= 0]] = True
+
+        # ---- walking targets that found nothing may re-acquire an unclaimed detection nearby
+        lost = np.flatnonzero(c[:n_w] == 0)
+        if lost.size and n_d and not claimed.all():
+            self._reacquire(lost, cw, det, claimed, assigned, t_ns)
+
+        # ---- walking targets: B9 likelihood with the assigned detection, resample (X1, B10)
+        aw = assigned[:n_w]
+        upd = aw >= 0
+        if upd.any():
+            feet = np.full((n_w, 2, 2), np.nan)
+            sd = np.zeros(n_w)
+            one = np.zeros(n_w, bool)
+            j = aw[upd]
+            feet[upd], sd[upd], one[upd] = det.feet[j], det.inter_feet[j], det.one_foot[j]
+            ll = laser_log_likelihood(self._x, feet, sd, one, p.sigma_f_m, p.sigma_w_m, sigma_f_one=p.sigma_f_one_m,
+                                      kappa=p.kappa, lateral_m=p.lateral_m)
+            self._w, _ = reweight(self._w, ll)
+            self._seen[upd] = t_ns
+            pos = self._walking_centres()
+            self._x, self._w = resample_where(self._x, self._w, upd, self.rng)
+        else:
+            pos = cw
+        self._track_velocity(pos, dt)
+
+        # ---- merged targets: members from the segment points, Kalman update on the centre
+        split_now: list[int] = []
+        dissolve: list[tuple[int, int]] = []
+        sensed_m = np.zeros(n_m, bool)
+        for i, m in enumerate(merged):
+            row = n_w + i
+            if m.split_since and t_ns - m.split_last > self._cand.gap_ns:
+                m.split_since = 0  # the split condition has been gone for a while: start again
+            if labels[row] == _SPLITTING:
+                js = np.flatnonzero(found[row])
+                if m.split_since == 0:
+                    m.split_since = t_ns
+                m.split_last = t_ns
+                if (t_ns - m.split_since >= self._frames_ns(p.n_split - 1) and len(m.info) >= 2
+                        and _max_pair_distance(det.centres[js]) >= p.split_min_m):
+                    split_now.append(i)
+                    claimed[js] = True
+            else:
+                js = assigned[row:row + 1][assigned[row:row + 1] >= 0]
+            if js.size == 0:
+                continue
+            z = det.centres[js].mean(axis=0)
+            pts = [det.points[j] for j in js] if det.points else []
+            points = np.concatenate(pts) if pts and all(q is not None for q in pts) else None
+            m.correct(points, z, dt, p.member_alpha, p.member_beta, p.member_min_gap_m)
+            xs, Ps = kalman.update(m.x[None], m.P[None], z[None], R=p.merged_r_m**2)
+            m.x, m.P = xs[0], Ps[0]
+            m.seen = t_ns
+            sensed_m[i] = True
+            if points is not None and i not in split_now:  # one person's legs only, for a while: dissolve
+                if js.size >= 2 or count_blobs(points, p.blob_radius_m) >= 3:
+                    m.multi_last = t_ns
+                elif t_ns - m.multi_last >= p.single_s * 1e9:
+                    dissolve.append((i, int(js[0])))
+
+        # ---- deaths: coasting too long, or missing on the edge
+        w_labels = labels[:n_w]
+        miss = t_ns - self._seen
+        settled = t_ns - self._born >= p.edge_min_age_s * 1e9  # who just came in does not leave at once
+        dead_w = ((w_labels == _DISAPPEARING) & settled & (miss > self._frames_ns(p.n_miss_edge))) | (
+            (aw < 0) & (miss > self._frames_ns(p.n_miss)))
+        dead_m = np.zeros(n_m, bool)
+        for i, m in enumerate(merged):
+            mmiss = t_ns - m.seen
+            dead_m[i] = (labels[n_w + i] == _DISAPPEARING and mmiss > self._frames_ns(p.n_miss_edge)) or (
+                mmiss > self._frames_ns(p.n_miss))
+        gone_w = dead_w.copy()
+        gone_m = dead_m.copy()
+        new_merged: list[_Merged] = []
+        new_walkers: list[dict[str, Any]] = []
+
+        # ---- merges (B7 rule 1, B17): targets sharing one detection become one merged target
+        if n_t:
+            dead = np.concatenate([dead_w, dead_m])
+            for j, group in sf.merge_groups.items():
+                group = group[~dead[group]]
+                if group.size >= 2:
+                    new_merged.append(self._merge(group, j, det, t_ns, gone_w, gone_m))
+
+        # ---- splits (B7 rule 2, B17): identity recovery by motion
+        for i in split_now:
+            if not gone_m[i]:
+                self._split(merged[i], np.flatnonzero(found[n_w + i]), det, t_ns, new_merged, new_walkers)
+                gone_m[i] = True
+
+        # ---- merged targets that hold one person only: the member nearest to it goes on, the others end
+        for i, j in dissolve:
+            if gone_m[i]:
+                continue
+            m = merged[i]
+            keep = int(np.argmin(np.linalg.norm(m.pos - det.centres[j], axis=1)))
+            info, v = m.info[keep], m.vel[keep]
+            new_walkers.append(self._new_walker(
+                info.track_id, det, j, v, info.heading_rad, t_ns, period_s=info.period_s, stride_m=info.stride_m,
+                standing=info.standing, born_ns=info.born_ns, born_edge=info.born_edge))
+            for k, other in enumerate(m.info):
+                if k != keep:
+                    self._death_event(other.track_id, m.seen, t_ns, m.pos[k], False)
+            gone_m[i] = True
+
+        # ---- outputs of the old rows that live on
+        states: list[TrackState] = []
+        sensor, sensors = p.sensor, self._sensors
+        appear_ns = p.appear_window_s * 1e9
+        for row in np.flatnonzero(~gone_w):
+            lab = int(w_labels[row])
+            tid = int(self._id[row])
+            sit = _SITUATION_NAMES[lab]
+            if lab == _NONCORRELATED and self._born_edge[row] and t_ns - self._born[row] < appear_ns:
+                sit = _APPEARING
+            elif lab == _CORRELATED:
+                self._extend_correlated(tid, t_ns, self._pos[row])
+            states.append(_fast_state(t_ns, sensor, tid, self._pos[row], self._vel[row], sit,
+                                      sensors if upd[row] else ()))
+        for i in np.flatnonzero(~gone_m):
+            m = merged[i]
+            sit = _DISAPPEARING_S if labels[n_w + i] == _DISAPPEARING else _MERGED_S
+            for k, info in enumerate(m.info):
+                states.append(_fast_state(t_ns, sensor, info.track_id, m.pos[k], m.vel[k], sit,
+                                          sensors if sensed_m[i] else ()))
+        for row in np.flatnonzero(dead_w):
+            self._death_event(int(self._id[row]), int(self._seen[row]), t_ns, self._pos[row], bool(edge_t[row]))
+        for i in np.flatnonzero(dead_m):
+            m = merged[i]
+            for k, info in enumerate(m.info):
+                self._death_event(info.track_id, m.seen, t_ns, m.pos[k], bool(edge_t[n_w + i]))
+
+        # ---- apply the structure changes
+        if gone_w.any():
+            keep = ~gone_w
+            for name in self._WALKING_ARRAYS:
+                setattr(self, name, getattr(self, name)[keep])
+        if gone_m.any() or new_merged:
+            self._merged = [m for m, g in zip(merged, gone_m, strict=True) if not g] + new_merged
+        for m in new_merged:
+            for k, info in enumerate(m.info):
+                states.append(_fast_state(t_ns, sensor, info.track_id, m.pos[k], m.vel[k], _MERGED_S, sensors))
+        for spec in new_walkers:
+            self._add_walking(**spec)
+            states.append(_fast_state(t_ns, sensor, spec["track_id"], spec["pos"], spec["vel"], _NONCORRELATED_S,
+                                      sensors))
+
+        # ---- births (B7 rule 6): candidates from unclaimed detections
+        free = np.flatnonzero(~claimed)
+        if free.size or len(self._cand):
+            states.extend(self._births(t_ns, det, free, edge_d))
+
+        # ---- correlated runs that ended, splits that were not undone
+        if self._corr:
+            gap = p.correlated_gap_s * 1e9
+            for tid in [tid for tid, run in self._corr.items() if t_ns - run[1] > gap]:
+                self._close_correlated(tid)
+        if self._held_splits:
+            hold = p.split_hold_s * 1e9
+            for key in [k for k, e in self._held_splits.items() if t_ns - e.t_ns > hold]:
+                self.events.append(self._held_splits.pop(key))
+        return states
+
+    # ---------------------------------------------------------------------------------------------
+    def _reacquire(self, lost: np.ndarray, cw: np.ndarray, det: DetectionArrays, claimed: np.ndarray,
+                   assigned: np.ndarray, t_ns: int) -> None:
+        """Targets that found nothing take unclaimed detections within a gate that grows while they coast."""
+        p = self.params
+        free = np.flatnonzero(~claimed)
+        miss_s = (t_ns - self._seen[lost]) / 1e9
+        radius = np.minimum(2.0 * p.bandwidth_m + p.reacquire_speed_mps * miss_s, p.reacquire_max_m)
+        dist = np.linalg.norm(cw[lost][:, None, :] - det.centres[free][None, :, :], axis=2)
+        cost = np.where(dist <= radius[:, None], dist, np.inf)
+        pairs, _, _ = hungarian(cost)
+        for a, b in pairs:
+            row, j = int(lost[a]), int(free[b])
+            x, w = self._x[row], self._w[row]
+            v = det.centres[j] - self._pos[row]
+            heading = float(np.arctan2(v[1], v[0])) if np.hypot(*v) >= 0.1 else float(
+                np.arctan2(w @ np.sin(x[:, PSI]), w @ np.cos(x[:, PSI])))
+            spec = self._new_walker(int(self._id[row]), det, j, self._vel[row], heading, t_ns,
+                                    period_s=float(w @ x[:, PERIOD]), stride_m=float(w @ x[:, STRIDE]),
+                                    standing=bool(self._standing[row]))
+            self._x[row] = spec["x"]
+            self._w[row] = 1.0 / p.n_particles
+            assigned[row] = j
+            claimed[j] = True
+
+    def _merge(self, group: np.ndarray, j: int, det: DetectionArrays, t_ns: int, gone_w: np.ndarray,
+               gone_m: np.ndarray) -> _Merged:
+        """A merged target from the targets (rows; walking first, then merged) that share detection ``j``."""
+        p = self.params
+        n_w = self._id.size
+        pos, vel, info, parts = [], [], [], []
+        for row in group:
+            if row < n_w:
+                x, w = self._x[row], self._w[row]
+                heading = float(np.arctan2(w @ np.sin(x[:, PSI]), w @ np.cos(x[:, PSI])))
+                info.append(_MemberInfo(int(self._id[row]), float(w @ x[:, PERIOD]), float(w @ x[:, STRIDE]),
+                                        heading, bool(self._standing[row]), int(self._born[row]),
+                                        bool(self._born_edge[row])))
+                pos.append(self._pos[row][None])
+                vel.append(self._vel[row][None])
+                parts.append((int(self._id[row]),))
+                gone_w[row] = True
+            else:
+                m = self._merged[row - n_w]
+                info.extend(m.info)
+                pos.append(m.pos)
+                vel.append(m.vel)
+                parts.append(tuple(sorted(m.ids)))
+                gone_m[row - n_w] = True
+        mpos, mvel = np.concatenate(pos), np.concatenate(vel)
+        centre = det.centres[j]
+        r2 = p.merged_r_m**2
+        out = _Merged(np.concatenate([centre, mvel.mean(axis=0)]), np.diag([r2, r2, 0.5**2, 0.5**2]), t_ns,
+                      mpos, mvel, info, multi_last=t_ns)
+        ids = tuple(sorted(out.ids))
+        if self._held_splits.pop(frozenset(ids), None) is None:  # else: they had not really split
+            self.events.append(Event(t_ns, p.sensor, "merge", t_ns, position_m=centre, track_ids=ids,
+                                     attributes={"parts": tuple(sorted(parts))}))
+        for tid in ids:
+            self._close_correlated(tid)
+        return out
+
+    def _split(self, m: _Merged, dets: np.ndarray, det: DetectionArrays, t_ns: int, new_merged: list[_Merged],
+               new_walkers: list[dict[str, Any]]) -> None:
+        """B17 identity recovery by motion: members to detections by Hungarian on their predicted positions."""
+        p = self.params
+        cost = np.linalg.norm(m.pos[:, None, :] - det.centres[dets][None, :, :], axis=2)
+        pairs, un_members, _ = hungarian(cost)
+        to_det = np.full(len(m.info), -1, np.int64)
+        to_det[pairs[:, 0]] = pairs[:, 1]
+        for k in un_members:  # more members than detections: the rest stay together at their nearest
+            to_det[k] = int(np.argmin(cost[k]))
+        parts = []
+        for jj in np.unique(to_det):
+            ks = np.flatnonzero(to_det == jj)
+            parts.append(tuple(sorted(m.info[k].track_id for k in ks)))
+            j = int(dets[jj])
+            if ks.size == 1:
+                k = int(ks[0])
+                info, v = m.info[k], m.vel[k]
+                speed = float(np.hypot(*v))
+                heading = float(np.arctan2(v[1], v[0])) if speed > 0.2 else info.heading_rad
+                new_walkers.append(self._new_walker(
+                    info.track_id, det, j, v, heading, t_ns, period_s=info.period_s, stride_m=info.stride_m,
+                    standing=info.standing and speed < p.resume_speed_mps, born_ns=info.born_ns,
+                    born_edge=info.born_edge))
+            else:
+                r2 = p.merged_r_m**2
+                new_merged.append(_Merged(np.concatenate([det.centres[j], m.vel[ks].mean(axis=0)]),
+                                          np.diag([r2, r2, 0.5**2, 0.5**2]), t_ns, m.pos[ks].copy(),
+                                          m.vel[ks].copy(), [m.info[k] for k in ks], multi_last=t_ns))
+        ids = tuple(sorted(m.ids))  # held back for split_hold_s: a merge of the same people undoes it
+        self._held_splits[frozenset(ids)] = Event(t_ns, p.sensor, "split", t_ns, position_m=m.x[0:2].copy(),
+                                                  track_ids=ids, attributes={"parts": tuple(sorted(parts))})
+
+    def _births(self, t_ns: int, det: DetectionArrays, free: np.ndarray, edge_d: np.ndarray) -> list[TrackState]:
+        p = self.params
+        cd = self._cand
+        blobs = None
+        if det.points and p.multi_fraction is not None:
+            blobs = np.array([0 if det.points[j] is None else count_blobs(det.points[j], p.blob_radius_m)
+                              for j in free], np.int64)
+        cd.update(t_ns, det.centres[free], edge_d[free], blobs)
+        ready = cd.ready(t_ns, self._frames_ns(p.n_confirm - 1), self._frames_ns(p.n_confirm_interior - 1))
+        states = []
+        for k in ready:
+            j = int(free[cd.det[k]])
+            span = max((t_ns - int(cd.first_t[k])) / 1e9, 1e-3)
+            v0 = (cd.pos[k] - cd.first_pos[k]) / span
+            heading = float(np.arctan2(v0[1], v0[0])) if np.hypot(*v0) * span >= 0.1 else float("nan")
+            edge = bool(cd.edge[k])
+            kind = "appear" if edge else "born"
+            n_people = 1
+            if (p.multi_fraction is not None and det.points and det.points[j] is not None
+                    and cd.n_multi[k] >= p.multi_fraction * cd.hits[k]):
+                n_people = 3 if cd.n_many[k] >= p.multi_fraction * cd.hits[k] else 2
+                n_people = min(n_people, det.points[j].shape[0] // 2)
+            if n_people >= 2:  # people who came together: born merged (B17), each with its own identity
+                m = self._born_merged(det, j, n_people, v0, heading, t_ns, edge)
+                self._merged.append(m)
+                for q, info in enumerate(m.info):
+                    self.events.append(Event(int(cd.first_t[k]), p.sensor, kind, t_ns, position_m=m.pos[q].copy(),
+                                             track_ids=(info.track_id,)))
+                    states.append(_fast_state(t_ns, p.sensor, info.track_id, m.pos[q], m.vel[q], _MERGED_S,
+                                              self._sensors))
+                continue
+            tid = next(self._next_id)
+            spec = self._new_walker(tid, det, j, v0, heading, t_ns, born_edge=edge)
+            self._add_walking(**spec)
+            self.events.append(Event(int(cd.first_t[k]), p.sensor, kind, t_ns, position_m=cd.first_pos[k].copy(),
+                                     track_ids=(tid,)))
+            states.append(_fast_state(t_ns, p.sensor, tid, spec["pos"], spec["vel"],
+                                      _APPEARING if edge else _NONCORRELATED_S, self._sensors))
+        if ready.size:
+            cd.pop(ready)
+        return states
+
+    def _born_merged(self, det: DetectionArrays, j: int, n: int, v0: np.ndarray, heading: float, t_ns: int,
+                     edge: bool) -> _Merged:
+        """A merged target of ``n`` new people from one segment: members spread along its principal axis,
+        refined by k-means on its points."""
+        p = self.params
+        pts = det.points[j]
+        c = pts.mean(axis=0)
+        _, _, vt = np.linalg.svd(pts - c, full_matrices=False)
+        proj = (pts - c) @ vt[0]
+        pos = c + np.linspace(proj.min(), proj.max(), 2 * n + 1)[1::2, None] * vt[0][None, :]
+        for _ in range(3):
+            lab = np.argmin(((pts[:, None, :] - pos[None, :, :]) ** 2).sum(axis=2), axis=1)
+            for q in range(n):
+                if np.count_nonzero(lab == q) >= 2:
+                    pos[q] = pts[lab == q].mean(axis=0)
+        speed = float(np.hypot(*v0))
+        stride = float(np.clip(speed * 1.1, 0.8, STRIDE_RANGE_M[1])) if speed > 0.3 else 1.4
+        hd = heading if math.isfinite(heading) else 0.0
+        info = [_MemberInfo(next(self._next_id), 1.1, stride, hd, speed < p.standing_speed_mps, t_ns, edge)
+                for _ in range(n)]
+        r2 = p.merged_r_m**2
+        return _Merged(np.concatenate([det.centres[j], v0]), np.diag([r2, r2, 0.5**2, 0.5**2]), t_ns, pos,
+                       np.repeat(np.asarray(v0, float)[None], n, axis=0), info, multi_last=t_ns)
+
+    # ---------------------------------------------------------------------------------------------
+    def _track_velocity(self, pos: np.ndarray, dt: float) -> None:
+        """Body position estimate, lagged position and velocity; B8's standing switch."""
+        p = self.params
+        if self._id.size == 0:
+            return
+        self._pos = pos
+        if dt > 0:
+            a = 1.0 - math.exp(-dt / p.velocity_tau_s)
+            self._lag += a * (pos - self._lag)
+            lag_s = dt * (1.0 - a) / a  # steady-state lag of the discrete EMA behind a ramp
+            self._vel = (pos - self._lag) / lag_s
+        speed = np.hypot(self._vel[:, 0], self._vel[:, 1])
+        was = self._standing
+        self._slow, self._standing = update_standing(speed, self._slow, self._standing, p.standing_speed_mps,
+                                                     p.standing_frames, p.resume_speed_mps)
+        n_p = p.n_particles
+        started = was & ~self._standing
+        if started.any():  # walks again: head where the track goes
+            psi = np.arctan2(self._vel[started, 1], self._vel[started, 0])
+            self._x[started, :, PSI] = psi[:, None] + p.init_heading_sigma_rad * self.rng.standard_normal(
+                (int(started.sum()), n_p))
+        if p.reseed_fraction > 0 and dt > 0:
+            rows = np.flatnonzero(~self._standing & (speed > p.resume_speed_mps))
+            if rows.size:
+                k = max(1, round(p.reseed_fraction * n_p))
+                start = self._reseed_at
+                self._reseed_at = (start + k) % max(n_p - k + 1, 1)
+                psi = np.arctan2(self._vel[rows, 1], self._vel[rows, 0])
+                self._x[rows, start:start + k, PSI] = psi[:, None] + p.init_heading_sigma_rad * standard_normal(
+                    self.rng, (rows.size, k))
+
+    def _new_walker(self, tid: int, det: DetectionArrays, j: int, v0: np.ndarray, heading: float, t_ns: int, *,
+                    period_s: float = 1.1, stride_m: float | None = None, standing: bool | None = None,
+                    born_ns: int | None = None, born_edge: bool = False) -> dict[str, Any]:
+        """Particles (B8 initialisation, with spreads) and bookkeeping of a target restarting at detection ``j``."""
+        p = self.params
+        speed = float(np.hypot(*v0))
+        if stride_m is None:
+            stride_m = float(np.clip(speed * period_s, 0.8, STRIDE_RANGE_M[1])) if speed > 0.3 else 1.4
+        x = init_walking(det.feet[j][None], p.n_particles, self.rng, np.array([heading]), period_s=period_s,
+                         stride_m=stride_m, feet_sigma_m=p.init_feet_sigma_m,
+                         heading_sigma_rad=p.init_heading_sigma_rad if math.isfinite(heading) else 0.0,
+                         period_sigma_s=p.init_period_sigma_s, stride_sigma_m=p.init_stride_sigma_m)
+        return {"track_id": tid, "x": x[0], "pos": det.centres[j].copy(), "vel": np.array(v0, float),
+                "seen": t_ns, "standing": (speed < p.standing_speed_mps) if standing is None else standing,
+                "born": t_ns if born_ns is None else born_ns, "born_edge": born_edge}
+
+    def _add_walking(self, *, track_id: int, x: np.ndarray, pos: np.ndarray, vel: np.ndarray, seen: int,
+                     standing: bool, born: int, born_edge: bool) -> None:
+        n_p = self.params.n_particles
+        self._x = np.concatenate([self._x, x[None]])
+        self._w = np.concatenate([self._w, np.full((1, n_p), 1.0 / n_p)])
+        self._id = np.append(self._id, track_id)
+        self._seen = np.append(self._seen, seen)
+        self._pos = np.concatenate([self._pos, pos[None]])
+        self._lag = np.concatenate([self._lag, (pos - vel * self.params.velocity_tau_s)[None]])
+        self._vel = np.concatenate([self._vel, vel[None]])
+        self._slow = np.append(self._slow, 0)
+        self._standing = np.append(self._standing, standing)
+        self._born = np.append(self._born, born)
+        self._born_edge = np.append(self._born_edge, born_edge)
+
+    # ---------------------------------------------------------------------------------------------
+    def _extend_correlated(self, tid: int, t_ns: int, pos: np.ndarray) -> None:
+        run = self._corr.get(tid)
+        if run is not None and t_ns - run[1] <= self.params.correlated_gap_s * 1e9:
+            run[1] = t_ns
+            return
+        if run is not None:
+            self._close_correlated(tid)
+        self._corr[tid] = [t_ns, t_ns, pos.copy()]
+
+    def _close_correlated(self, tid: int) -> None:
+        """End the correlated run of ``tid``: one event, if it lasted ``min_correlated_s``."""
+        run = self._corr.pop(tid, None)
+        if run is not None and run[1] - run[0] >= self.params.min_correlated_s * 1e9:
+            self.events.append(Event(int(run[0]), self.params.sensor, "correlated", int(run[1]), position_m=run[2],
+                                     track_ids=(tid,)))
+
+    def _death_event(self, tid: int, seen_ns: int, t_ns: int, pos: np.ndarray, edge: bool) -> None:
+        self._close_correlated(tid)
+        self.events.append(Event(min(seen_ns, t_ns), self.params.sensor, "disappear" if edge else "lost", t_ns,
+                                 position_m=np.asarray(pos, float).copy(), track_ids=(tid,)))
+
+
+# --------------------------------------------------------------------------------------------------
+# Area from the scanners' backgrounds
+# --------------------------------------------------------------------------------------------------
+
+
+def area_from_backgrounds(detector: Any, geometries: Mapping[str, tuple[float, float]],
+                          poses: Mapping[str, np.ndarray]) -> np.ndarray | None:
+    """The covered area inferred from what the scanners see: the convex hull of every background point
+    (beams with a static return) and of the scanners themselves, world frame, ``(m, 2)`` vertices.
+
+    Parameters
+    ----------
+    detector : LaserPeopleDetector
+        With learnt backgrounds (:meth:`~fusiontrack.laser.LaserPeopleDetector.background`).
+    geometries : mapping of sensor -> (angle_min_rad, angle_increment_rad)
+    poses : mapping of sensor -> laser2world ``(3, 3)`` or ``(4, 4)``
+
+    Returns
+    -------
+    (m, 2) float64 or None
+        ``None`` while no scanner has a learnt background with returns.
+    """
+    from scipy.spatial import ConvexHull, QhullError
+
+    from ..laser.detector import planar_pose
+
+    pts = []
+    for name, (a0, inc) in geometries.items():
+        bg = detector.background(name)
+        if bg is None or not bg.initialised:
+            continue
+        r = np.asarray(bg.background_m, float)
+        ok = np.isfinite(r) & (r < bg.range_max_m * 0.999)
+        if not ok.any():
+            continue
+        a = a0 + np.flatnonzero(ok) * inc
+        R, t = planar_pose(poses[name])
+        local = np.column_stack([r[ok] * np.cos(a), r[ok] * np.sin(a)])
+        pts.append(local @ R.T + t)
+        pts.append(t[None])
+    if not pts:
+        return None
+    allp = np.concatenate(pts)
+    try:
+        hull = ConvexHull(allp)
+    except (QhullError, ValueError):
+        return None
+    return allp[hull.vertices]
+
+
+# --------------------------------------------------------------------------------------------------
+# A whole recording
+# --------------------------------------------------------------------------------------------------
+
+
+_BACKGROUND_ARGS = ("alpha", "beta", "gamma", "tau_fg_m", "n_init", "init", "bin_m")
+
+
+def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "pf",
+                    params: TrackerParams | Mapping[str, Any] | None = None,
+                    progress: Callable[[float], None] | None = None, topics: Iterable[str] | None = None,
+                    time_source: str = "header", area_m: Any = "auto",
+                    clock_corrections_ns: Mapping[str, int] | None = None,
+                    detector_params: Mapping[str, Any] | None = None, rng: np.random.Generator | int | None = 0,
+                    world_frame: str = "world", timings: dict[str, list[float]] | None = None,
+                    background: str = "learn") -> tuple[list[TrackState], list[Event]]:
+    """Detect and track the people in a recording's laser scans.
+
+    Builds a :class:`~fusiontrack.laser.LaserPeopleDetector` from the laser topics (each scanner posed by
+    ``/tf_static``: its frame to ``world_frame``; the identity when there is no such transform, i.e. tracks
+    in the laser frame), puts the scans on one clock and in time order
+    (:func:`fusiontrack.io.sync.synchronize`) and steps the tracker once per scan time.
+
+    Parameters
+    ----------
+    path : recording path(s)
+    tracker : ``"pf"`` or ``"kalman"``
+        :class:`LaserPeopleTracker` or :class:`~fusiontrack.tracking.baseline.CVKalmanTracker`.
+    params : TrackerParams, mapping or None
+        Tracker parameters (for ``"kalman"``: keyword arguments of the baseline).
+    progress : callable, optional
+        Called with the fraction of scans done (0..1) every 100 scans and at the end.
+    topics : iterable of str, optional
+        Laser topics to use; default every ``sensor_msgs/msg/LaserScan`` topic.
+    time_source : ``"header"`` or ``"log"``
+        Scan times from header stamps (default) or from the recording's log time.
+    area_m : ``"auto"``, None, rectangle or polygon
+        The covered area; ``"auto"`` infers it from the learnt backgrounds (:func:`area_from_backgrounds`).
+    clock_corrections_ns : mapping sensor -> ns, optional
+        Added to each sensor's stamps (see :class:`~fusiontrack.io.sync.Synchronizer`).
+    detector_params : mapping, optional
+        Keyword arguments of the detector.
+    rng : Generator or int
+    world_frame : str
+    timings : dict, optional
+        Filled with per-step lists ``"detect_s"`` (detector update + detect) and ``"track_s"`` (tracker step).
+    background : ``"learn"`` or ``"none"``
+        ``"learn"``: the detector learns each scanner's background (fixed scanners). ``"none"``: a scanner on
+        a moving platform, whose background cannot be learnt: every return is foreground (the background is
+        set to "no return" and never learns, ``alpha = gamma = 0`` unless ``detector_params`` say otherwise).
+
+    Returns
+    -------
+    states : list of TrackState
+        Every state of every step, in time order.
+    events : list of Event
+    """
+    from ..geometry import TransformTree
+    from ..io.recording import LASERSCAN, Recording
+    from ..io.sync import synchronize
+    from ..laser.background import BeamBackground
+    from ..laser.detector import LaserPeopleDetector
+    from ..types import LaserScan
+    from .baseline import CVKalmanTracker
+
+    if tracker not in ("pf", "kalman"):
+        raise ConfigError(f"tracker: expected 'pf' or 'kalman', got {tracker!r}")
+    with Recording(path) as rec:
+        info = rec.topics()
+        lasers = [t for t, i in info.items() if i.msgtype == LASERSCAN] if topics is None else list(topics)
+        if not lasers:
+            raise ConfigError(f"{path}: no sensor_msgs/LaserScan topic to track")
+        total = sum(info[t].count for t in lasers if t in info)
+        tree = TransformTree()
+        if "/tf_static" in info:
+            for tf in rec.messages(["/tf_static"]):
+                try:
+                    tree.add_record(tf)
+                except ConfigError as err:
+                    log.warning("tf_static: %s", err)
+        first: dict[str, Any] = {}
+        for scan in rec.messages(lasers, time_source=time_source):  # one scan per topic: frame ids
+            first.setdefault(scan.sensor, scan)
+            if len(first) == len(lasers):
+                break
+        poses: dict[str, np.ndarray] = {}
+        for sensor, scan in first.items():
+            pose = np.eye(4)
+            for frame in (scan.frame_id, sensor):
+                if frame and tree.has_path(frame, world_frame):
+                    pose = tree.get(frame, world_frame)
+                    break
+            poses[sensor] = pose
+        if not poses:
+            raise ConfigError(f"{path}: the laser topics {lasers} hold no scans")
+        if background not in ("learn", "none"):
+            raise ConfigError(f"background: expected 'learn' or 'none', got {background!r}")
+        dparams = dict(detector_params or {})
+        if background == "none":
+            dparams = {"alpha": 0.0, "gamma": 0.0, **dparams}
+        detector = LaserPeopleDetector(poses, **dparams)
+        if background == "none":  # learn "no return" on every beam, from scans that hold nothing
+            for sensor, scan in first.items():
+                bg = BeamBackground(1, **{k: v for k, v in dparams.items() if k in _BACKGROUND_ARGS})
+                blank = np.full(scan.n_beams, np.nan, np.float32)
+                for i in range(bg.n_init):
+                    detector.update(LaserScan(scan.t_ns - (bg.n_init - i) * 1_000_000, sensor, scan.frame_id,
+                                              scan.angle_min_rad, scan.angle_increment_rad, scan.range_min_m,
+                                              scan.range_max_m, blank))
+        area = None if isinstance(area_m, str) else area_m
+        if tracker == "pf":
+            trk: Any = LaserPeopleTracker(params, area_m=area, rng=rng)
+        else:
+            trk = CVKalmanTracker(**{"area_m": area, **dict(params or {})})
+        auto_area = isinstance(area_m, str)
+        if auto_area and area_m != "auto":
+            raise ConfigError(f"area_m: expected 'auto', None, a rectangle or a polygon, got {area_m!r}")
+        geometries: dict[str, tuple[float, float]] = {}
+        states: list[TrackState] = []
+        events: list[Event] = []
+        stream = synchronize(rec.messages(lasers, time_source=time_source),
+                             clock_corrections_ns=clock_corrections_ns)
+        pending_t: int | None = None
+        t_det = 0.0
+
+        def run_step(t: int, t_det: float) -> None:
+            nonlocal auto_area
+            t0 = time.perf_counter()
+            dets = detector.detect(t)
+            t1 = time.perf_counter()
+            if auto_area and dets:
+                polygon = area_from_backgrounds(detector, geometries, poses)
+                if polygon is not None:
+                    trk.area_m = polygon
+                    auto_area = False
+            t2 = time.perf_counter()
+            states.extend(trk.step(t, dets))
+            t3 = time.perf_counter()
+            events.extend(trk.events)
+            if timings is not None:
+                timings.setdefault("detect_s", []).append(t_det + (t1 - t0))
+                timings.setdefault("track_s", []).append(t3 - t2)
+
+        for done, scan in enumerate(stream, start=1):
+            if pending_t is not None and scan.t_ns != pending_t:
+                run_step(pending_t, t_det)
+                t_det = 0.0
+            t0 = time.perf_counter()
+            detector.update(scan)
+            t_det += time.perf_counter() - t0
+            geometries[scan.sensor] = (scan.angle_min_rad, scan.angle_increment_rad)
+            pending_t = scan.t_ns
+            if progress is not None and done % 100 == 0:
+                progress(min(done / max(total, 1), 1.0))
+        if pending_t is not None:
+            run_step(pending_t, t_det)
+        if isinstance(trk, LaserPeopleTracker):
+            events.extend(trk.finish())
+        if progress is not None:
+            progress(1.0)
+    return states, events
