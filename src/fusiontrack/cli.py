@@ -331,6 +331,9 @@ def track(
     time_source: Annotated[str, typer.Option("--time", help="header (capture stamps) or log (recorder).")] = "header",
     video: Annotated[bool, typer.Option(help="Also write a bird's-eye video with the tracks.")] = True,
     seed: Annotated[int, typer.Option(help="Random seed of the particle filters.")] = 0,
+    area: Annotated[str, typer.Option(help="Covered area, where people appear and leave: 'auto' (from the "
+                                      "learnt laser backgrounds), 'none' (a moving scanner: no edge) or "
+                                      "x_min,y_min,x_max,y_max in metres.")] = "auto",
 ) -> None:
     """Track people in a recording; writes tracks.csv, tracks.jsonl (states + events) and tracks.mp4."""
     from .io.tracks import write_jsonl, write_tracks_csv
@@ -342,13 +345,21 @@ def track(
         raise ConfigError(f"--time: expected 'header' or 'log', got {time_source!r}")
     cfg = _load_config(config)
     topics = [s.topic for s in cfg.sensors.values() if s.kind == "laser"] or None
+    area_m: Any = {"auto": "auto", "none": None}.get(area)
+    if area_m is None and area != "none":
+        try:
+            area_m = [float(v) for v in area.split(",")]
+        except ValueError as err:
+            raise ConfigError(f"--area: expected auto, none or x_min,y_min,x_max,y_max, got {area!r}") from err
+        if len(area_m) != 4 or not (area_m[0] < area_m[2] and area_m[1] < area_m[3]):
+            raise ConfigError(f"--area: expected x_min,y_min,x_max,y_max with min < max, got {area!r}")
     timings: dict[str, list[float]] = {"detect_s": [], "track_s": []}
     with progress() as bar:
         task = bar.add_task(f"tracking ({tracker_kind})", total=1.0)
         states, events = track_recording(
             recordings, tracker=tracker_kind, params=cfg.tracking or None, topics=topics, time_source=time_source,
             clock_corrections_ns=cfg.clock_corrections_ns(), detector_params=cfg.laser or None, rng=seed,
-            timings=timings, progress=lambda f: bar.update(task, completed=f))
+            area_m=area_m, timings=timings, progress=lambda f: bar.update(task, completed=f))
     output.mkdir(parents=True, exist_ok=True)
     write_tracks_csv(output / "tracks.csv", states)
     write_jsonl(output / "tracks.jsonl", [*states, *events])
@@ -395,7 +406,25 @@ def _read_truth(path: Path, topic: str | None, time_source: str) -> tuple[list[A
             if topic is None:
                 raise ConfigError(f"{path}: say which ground-truth topic to use with --topic "
                                   f"(found {', '.join(candidates) or 'none'})")
-        frames = [m for m in rec.messages([topic], time_source=time_source) if isinstance(m, GroundTruth)]
+        if info[topic].msgtype == "leg_tracker/msg/Person":
+            # leg_tracker's annotators' rule: the Person messages that follow scan k belong to scan k
+            from .io.recording import LASERSCAN
+            from .io.sync import with_time
+
+            lasers = [t for t, i in info.items() if i.msgtype == LASERSCAN]
+            frames, scan_t = [], None
+            for m in rec.messages([*lasers, topic], time_source="log"):
+                if isinstance(m, GroundTruth):
+                    if scan_t is not None:
+                        frames.append(with_time(m, scan_t))
+                else:
+                    scan_t = m.t_ns  # log order decides which scan an annotation follows
+            if time_source == "header":  # restamp with the scans' header times
+                by_log = {s_log: s.t_ns for s_log, s in zip(
+                    (x.t_ns for x in rec.messages(lasers, time_source="log")), rec.messages(lasers), strict=True)}
+                frames = [with_time(f, by_log[f.t_ns]) for f in frames]
+        else:
+            frames = [m for m in rec.messages([topic], time_source=time_source) if isinstance(m, GroundTruth)]
     return frames, topic
 
 
