@@ -104,6 +104,8 @@ def test_demo_writes_its_outputs(shared_data, tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["simulated"]["messages"]["laser_0"] == 75  # 3 s at 25 Hz
     assert summary["simulated"]["preview_frames"] >= 40  # ~45 camera frames, 1 % of them dropped
+    assert summary["simulated"]["tracks"] >= 1
+    assert 0.0 <= summary["simulated"]["metrics"]["recall"] <= 1.0
     assert summary["input"]["topics"][0]["count"] == 1265
     assert summary["converted"]["topics"][0]["count"] == 1265
     assert summary["preview"]["frames"] == 1265
