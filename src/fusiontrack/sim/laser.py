@@ -29,30 +29,14 @@ from fusiontrack.sim.model import (
     LaserSpec,
     StaticWorld,
     rect_corners,
+    rect_sides,
 )
 from fusiontrack.types import LaserScan
 
-__all__ = ["BICYCLE_LASER_WIDTH_M", "LaserSim", "cast_rays", "rect_sides"]
+__all__ = ["BICYCLE_LASER_WIDTH_M", "LaserSim", "cast_rays"]
 
 BICYCLE_LASER_WIDTH_M = 0.08
 """Width of the thin rectangle a bicycle shows at laser height (frame and wheels, not the handlebar)."""
-
-
-def rect_sides(corners_m: np.ndarray) -> np.ndarray:
-    """The four sides of polygons given by their corners.
-
-    Parameters
-    ----------
-    corners_m : (n, 4, 2) float
-        Corners in order (as :func:`fusiontrack.sim.model.rect_corners` gives them, counter-clockwise).
-
-    Returns
-    -------
-    (n, 4, 2, 2) float64
-        Side ``k`` of polygon ``i`` runs from corner ``k`` to corner ``k + 1 (mod 4)``.
-    """
-    corners_m = np.asarray(corners_m, np.float64)
-    return np.stack([corners_m, np.roll(corners_m, -1, axis=1)], axis=2)
 
 
 def _segment_ranges(origin_m: np.ndarray, dx: np.ndarray, dy: np.ndarray, segments_m: np.ndarray,

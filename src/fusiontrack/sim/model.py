@@ -73,7 +73,7 @@ class StaticWorld:
         ``(n, 2, 2)``."""
         tall = self.boxes[:, 5] > height_m
         corners = self.box_corners()[tall]
-        sides = np.stack([corners, np.roll(corners, -1, axis=1)], axis=2).reshape(-1, 2, 2)
+        sides = rect_sides(corners).reshape(-1, 2, 2)
         walls = self.walls if self.wall_height_m > height_m else np.zeros((0, 2, 2))
         return np.concatenate([walls, sides], axis=0)
 
@@ -94,6 +94,23 @@ def rect_corners(centre: np.ndarray, length: np.ndarray, width: np.ndarray, yaw:
     c, s = np.cos(yaw), np.sin(yaw)
     rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], axis=-2).reshape(-1, 2, 2)
     return np.einsum("nij,nkj->nki", rot, local) + centre[:, None, :]
+
+
+def rect_sides(corners_m: np.ndarray) -> np.ndarray:
+    """The four sides of polygons given by their corners.
+
+    Parameters
+    ----------
+    corners_m : (n, 4, 2) float
+        Corners in order (as :func:`fusiontrack.sim.model.rect_corners` gives them, counter-clockwise).
+
+    Returns
+    -------
+    (n, 4, 2, 2) float64
+        Side ``k`` of polygon ``i`` runs from corner ``k`` to corner ``k + 1 (mod 4)``.
+    """
+    corners_m = np.asarray(corners_m, np.float64)
+    return np.stack([corners_m, np.roll(corners_m, -1, axis=1)], axis=2)
 
 
 @dataclass(frozen=True, slots=True, eq=False)

@@ -12,7 +12,7 @@ from typing import NamedTuple
 import numpy as np
 
 from fusiontrack.errors import ConfigError
-from fusiontrack.sim.model import StaticWorld
+from fusiontrack.sim.model import StaticWorld, rect_sides
 
 BENCH_SIZE_M = (1.6, 0.45, 0.45)
 """Length, width and height of a bench box."""
@@ -198,7 +198,7 @@ def doors(world: StaticWorld, min_width_m: float = 0.8) -> Doors:
 def obstacle_segments(world: StaticWorld) -> np.ndarray:
     """Walls and the sides of every box (benches included: people walk round them), ``(n, 2, 2)``."""
     corners = world.box_corners()
-    sides = np.stack([corners, np.roll(corners, -1, axis=1)], axis=2).reshape(-1, 2, 2)
+    sides = rect_sides(corners).reshape(-1, 2, 2)
     return np.concatenate([world.walls, sides], axis=0)
 
 
