@@ -40,7 +40,7 @@ from fusiontrack.laser.background import BeamBackground, InitMethod
 from fusiontrack.laser.clustering import Segments, cluster_scan, mean_shift_segments
 from fusiontrack.types import Detection, LaserScan
 
-__all__ = ["LaserPeopleDetector", "planar_pose"]
+__all__ = ["LaserPeopleDetector", "detector_for_recording", "planar_pose"]
 
 log = logging.getLogger(__name__)
 
@@ -262,3 +262,73 @@ class LaserPeopleDetector:
                                 "one_foot": np.asarray(seg.one_foot[j]), "mode_m": seg.modes_m[j]})
             for j in range(k)
         ]
+
+
+_BACKGROUND_ARGS = ("alpha", "beta", "gamma", "tau_fg_m", "n_init", "init", "bin_m")
+
+
+def detector_for_recording(rec: Any, lasers: list[str], *, time_source: str = "header", world_frame: str = "world",
+                           background: str = "learn", detector_params: Mapping[str, Any] | None = None,
+                           ) -> tuple[LaserPeopleDetector, dict[str, np.ndarray]]:
+    """A :class:`LaserPeopleDetector` for the laser topics of an open recording.
+
+    Each scanner is posed by ``/tf_static`` (its frame, or else its sensor name, to ``world_frame``; the
+    identity when there is no such transform, i.e. the laser frame is the world).
+
+    Parameters
+    ----------
+    rec : Recording
+        Open recording.
+    lasers : list of str
+        Laser topics.
+    time_source, world_frame :
+        As in :func:`~fusiontrack.tracking.track_recording`.
+    background : ``"learn"`` or ``"none"``
+        ``"none"``: a scanner on a moving platform; every return is foreground (the background is set to "no
+        return" and never learns, ``alpha = gamma = 0`` unless ``detector_params`` say otherwise).
+    detector_params : mapping, optional
+        Keyword arguments of the detector.
+
+    Returns
+    -------
+    detector, poses : the detector and each sensor's ``(4, 4)`` laser2world.
+    """
+    from fusiontrack.geometry import TransformTree
+
+    if background not in ("learn", "none"):
+        raise ConfigError(f"background: expected 'learn' or 'none', got {background!r}")
+    tree = TransformTree()
+    if "/tf_static" in rec.topics():
+        for tf in rec.messages(["/tf_static"]):
+            try:
+                tree.add_record(tf)
+            except ConfigError as err:
+                log.warning("tf_static: %s", err)
+    first: dict[str, Any] = {}
+    for scan in rec.messages(lasers, time_source=time_source):  # one scan per topic: frame ids
+        first.setdefault(scan.sensor, scan)
+        if len(first) == len(lasers):
+            break
+    poses: dict[str, np.ndarray] = {}
+    for sensor, scan in first.items():
+        pose = np.eye(4)
+        for frame in (scan.frame_id, sensor):
+            if frame and tree.has_path(frame, world_frame):
+                pose = tree.get(frame, world_frame)
+                break
+        poses[sensor] = pose
+    if not poses:
+        raise ConfigError(f"{rec.paths[0]}: the laser topics {lasers} hold no scans")
+    dparams = dict(detector_params or {})
+    if background == "none":
+        dparams = {"alpha": 0.0, "gamma": 0.0, **dparams}
+    detector = LaserPeopleDetector(poses, **dparams)
+    if background == "none":  # learn "no return" on every beam, from scans that hold nothing
+        for sensor, scan in first.items():
+            bg = BeamBackground(1, **{k: v for k, v in dparams.items() if k in _BACKGROUND_ARGS})
+            blank = np.full(scan.n_beams, np.nan, np.float32)
+            for i in range(bg.n_init):
+                detector.update(LaserScan(scan.t_ns - (bg.n_init - i) * 1_000_000, sensor, scan.frame_id,
+                                          scan.angle_min_rad, scan.angle_increment_rad, scan.range_min_m,
+                                          scan.range_max_m, blank))
+    return detector, poses

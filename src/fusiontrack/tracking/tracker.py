@@ -1262,8 +1262,6 @@ def area_from_backgrounds(detector: Any, geometries: Mapping[str, tuple[float, f
 # --------------------------------------------------------------------------------------------------
 
 
-_BACKGROUND_ARGS = ("alpha", "beta", "gamma", "tau_fg_m", "n_init", "init", "bin_m")
-
 
 def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "pf",
                     params: TrackerParams | Mapping[str, Any] | None = None,
@@ -1314,12 +1312,9 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
         Every state of every step, in time order.
     events : list of Event
     """
-    from ..geometry import TransformTree
     from ..io.recording import LASERSCAN, Recording
     from ..io.sync import synchronize
-    from ..laser.background import BeamBackground
-    from ..laser.detector import LaserPeopleDetector
-    from ..types import LaserScan
+    from ..laser.detector import detector_for_recording
     from .baseline import CVKalmanTracker
 
     if tracker not in ("pf", "kalman"):
@@ -1330,42 +1325,8 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
         if not lasers:
             raise ConfigError(f"{path}: no sensor_msgs/LaserScan topic to track")
         total = sum(info[t].count for t in lasers if t in info)
-        tree = TransformTree()
-        if "/tf_static" in info:
-            for tf in rec.messages(["/tf_static"]):
-                try:
-                    tree.add_record(tf)
-                except ConfigError as err:
-                    log.warning("tf_static: %s", err)
-        first: dict[str, Any] = {}
-        for scan in rec.messages(lasers, time_source=time_source):  # one scan per topic: frame ids
-            first.setdefault(scan.sensor, scan)
-            if len(first) == len(lasers):
-                break
-        poses: dict[str, np.ndarray] = {}
-        for sensor, scan in first.items():
-            pose = np.eye(4)
-            for frame in (scan.frame_id, sensor):
-                if frame and tree.has_path(frame, world_frame):
-                    pose = tree.get(frame, world_frame)
-                    break
-            poses[sensor] = pose
-        if not poses:
-            raise ConfigError(f"{path}: the laser topics {lasers} hold no scans")
-        if background not in ("learn", "none"):
-            raise ConfigError(f"background: expected 'learn' or 'none', got {background!r}")
-        dparams = dict(detector_params or {})
-        if background == "none":
-            dparams = {"alpha": 0.0, "gamma": 0.0, **dparams}
-        detector = LaserPeopleDetector(poses, **dparams)
-        if background == "none":  # learn "no return" on every beam, from scans that hold nothing
-            for sensor, scan in first.items():
-                bg = BeamBackground(1, **{k: v for k, v in dparams.items() if k in _BACKGROUND_ARGS})
-                blank = np.full(scan.n_beams, np.nan, np.float32)
-                for i in range(bg.n_init):
-                    detector.update(LaserScan(scan.t_ns - (bg.n_init - i) * 1_000_000, sensor, scan.frame_id,
-                                              scan.angle_min_rad, scan.angle_increment_rad, scan.range_min_m,
-                                              scan.range_max_m, blank))
+        detector, poses = detector_for_recording(rec, lasers, time_source=time_source, world_frame=world_frame,
+                                                 background=background, detector_params=detector_params)
         area = None if isinstance(area_m, str) else area_m
         if tracker == "pf":
             trk: Any = LaserPeopleTracker(params, area_m=area, rng=rng)
