@@ -1270,7 +1270,7 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
                     clock_corrections_ns: Mapping[str, int] | None = None,
                     detector_params: Mapping[str, Any] | None = None, rng: np.random.Generator | int | None = 0,
                     world_frame: str = "world", timings: dict[str, list[float]] | None = None,
-                    background: str = "learn") -> tuple[list[TrackState], list[Event]]:
+                    background: str = "learn", classify: bool = True) -> tuple[list[TrackState], list[Event]]:
     """Detect and track the people in a recording's laser scans.
 
     Builds a :class:`~fusiontrack.laser.LaserPeopleDetector` from the laser topics (each scanner posed by
@@ -1305,6 +1305,9 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
         ``"learn"``: the detector learns each scanner's background (fixed scanners). ``"none"``: a scanner on
         a moving platform, whose background cannot be learnt: every return is foreground (the background is
         set to "no return" and never learns, ``alpha = gamma = 0`` unless ``detector_params`` say otherwise).
+    classify : bool
+        Give each track its class (person / bicycle / car) with :class:`~fusiontrack.tracking.classify.
+        TrackClassifier` (B18); its time is part of ``"track_s"``.
 
     Returns
     -------
@@ -1316,6 +1319,7 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
     from ..io.sync import synchronize
     from ..laser.detector import detector_for_recording
     from .baseline import CVKalmanTracker
+    from .classify import TrackClassifier
 
     if tracker not in ("pf", "kalman"):
         raise ConfigError(f"tracker: expected 'pf' or 'kalman', got {tracker!r}")
@@ -1336,6 +1340,7 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
         if auto_area and area_m != "auto":
             raise ConfigError(f"area_m: expected 'auto', None, a rectangle or a polygon, got {area_m!r}")
         geometries: dict[str, tuple[float, float]] = {}
+        classifier = TrackClassifier() if classify else None
         states: list[TrackState] = []
         events: list[Event] = []
         stream = synchronize(rec.messages(lasers, time_source=time_source),
@@ -1354,7 +1359,8 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
                     trk.area_m = polygon
                     auto_area = False
             t2 = time.perf_counter()
-            states.extend(trk.step(t, dets))
+            new = trk.step(t, dets)
+            states.extend(classifier.update(t, new, dets) if classifier is not None else new)
             t3 = time.perf_counter()
             events.extend(trk.events)
             if timings is not None:

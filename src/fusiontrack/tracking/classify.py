@@ -1,0 +1,108 @@
+"""What each track is: person, bicycle or car, from its laser segments over time (ALGORITHMS.md B18).
+
+:class:`TrackClassifier` follows a tracker: each frame it takes the tracker's states and the detections of
+that frame, gives every track the detection nearest to it (within ``gate_m``; not while the track is merged or
+correlated: its segment is then shared with another target), keeps the last ``window``
+shape rows (:func:`~fusiontrack.laser.features.segment_features`) and positions of each track, classifies
+every track with a full window every ``every`` frames (:class:`~fusiontrack.laser.classifier.ObjectClassifier`,
+one vectorised call for all tracks) and smooths the class by a majority vote over the last ``vote``
+predictions (B18 votes over 10 frames; 3 predictions 5 frames apart cover 15). The states come back with
+``cls`` set; a track keeps the tracker's class until its first prediction.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import Counter, deque
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from fusiontrack.laser.features import GEOMETRIC_FEATURES, segment_features, window_features
+from fusiontrack.types import Detection, ObjectClass, Situation, TrackState
+
+__all__ = ["TrackClassifier"]
+
+_SHARED = (Situation.MERGED, Situation.CORRELATED)
+
+
+class TrackClassifier:
+    """Per-track object class from a window of its segments (B18: ``W_c = 10`` frames, vote over 10).
+
+    Parameters
+    ----------
+    model : ObjectClassifier, optional
+        Default: the classifier shipped with the package.
+    window : int
+        Frames of a track's segments the classifier sees (B18 ``W_c`` = 10).
+    every : int
+        Frames between two predictions of a track (5): the window moves little in between, and predicting
+        every frame doubled the tracker's time per scan.
+    vote : int
+        Predictions in the majority vote (3); a tie keeps the class the track had.
+    gate_m : float
+        A track takes the nearest detection within this distance of its position (0.5 m).
+    """
+
+    def __init__(self, model: Any = None, *, window: int = 10, every: int = 5, vote: int = 3,
+                 gate_m: float = 0.5) -> None:
+        from fusiontrack.laser.classifier import default_classifier
+
+        if int(window) < 2:
+            raise ValueError(f"window: expected >= 2 frames, got {window}")
+        if int(vote) < 1:
+            raise ValueError(f"vote: expected >= 1, got {vote}")
+        if int(every) < 1:
+            raise ValueError(f"every: expected >= 1 frame, got {every}")
+        if not gate_m > 0:
+            raise ValueError(f"gate_m: expected > 0 m, got {gate_m}")
+        self.model = default_classifier() if model is None else model
+        self.window, self.every, self.vote, self.gate_m = int(window), int(every), int(vote), float(gate_m)
+        self._rows: dict[int, deque[tuple[float, np.ndarray, np.ndarray]]] = {}  # (t_s, points, centre)
+        self._frame = -1
+        self._votes: dict[int, deque[str]] = {}
+        self._cls: dict[int, str] = {}
+
+    def classes(self) -> dict[int, str]:
+        """The current class of every track seen so far."""
+        return dict(self._cls)
+
+    def update(self, t_ns: int, states: Sequence[TrackState], detections: Sequence[Detection]) -> list[TrackState]:
+        """Take one frame; return ``states`` with ``cls`` set."""
+        live = [s for s in states if s.t_ns == t_ns]
+        if live and detections:
+            have = [d for d in detections if d.features.get("points_m") is not None and len(d.features["points_m"])]
+            if have:
+                centres = np.stack([d.position_m for d in have])
+                pos = np.stack([s.position_m for s in live])
+                dist, j = cKDTree(centres).query(pos, distance_upper_bound=self.gate_m)
+                for s, dd, jj in zip(live, dist, j, strict=True):
+                    # A merged or correlated target shares its segment with another: not its own shape.
+                    if np.isfinite(dd) and s.situation not in _SHARED:
+                        rows = self._rows.setdefault(s.track_id, deque(maxlen=self.window))
+                        rows.append((t_ns * 1e-9, have[jj].features["points_m"], centres[jj]))
+        # Every track with a full window is predicted on the same frames (one vectorised call per `every`
+        # frames, not a few tracks on every frame).
+        self._frame += 1
+        full = [s.track_id for s in live if len(self._rows.get(s.track_id, ())) == self.window] \
+            if self._frame % self.every == 0 else []
+        if full:
+            # One call for every frame of every window: the shape of a segment is computed when it is used,
+            # once per `every` frames, not each frame.
+            segs = [row for tid in full for row in self._rows[tid]]
+            points = np.concatenate([r[1] for r in segs])
+            labels = np.repeat(np.arange(len(segs)), [len(r[1]) for r in segs])
+            g = segment_features(points, labels, len(segs)).reshape(len(full), self.window, len(GEOMETRIC_FEATURES))
+            c = np.array([r[2] for r in segs]).reshape(len(full), self.window, 2)
+            t = np.array([r[0] for r in segs]).reshape(len(full), self.window)
+            pred = self.model.predict(window_features(g, c, t - t[:, :1]))
+            for tid, p in zip(full, pred, strict=True):
+                votes = self._votes.setdefault(tid, deque(maxlen=self.vote))
+                votes.append(str(p))
+                counts = Counter(votes).most_common()
+                if len(counts) == 1 or counts[0][1] > counts[1][1] or tid not in self._cls:
+                    self._cls[tid] = counts[0][0]
+        return [dataclasses.replace(s, cls=self._cls.get(s.track_id, ObjectClass.UNKNOWN))
+                if s.track_id in self._cls and s.cls != self._cls[s.track_id] else s for s in states]
