@@ -178,3 +178,33 @@ def test_track_and_eval_the_real_outdoor_bag(outdoor_bag, tmp_path):
     metrics = json.loads(metrics_json.read_text())["metrics"]
     assert metrics["recall"] > 0.95  # the followed person is tracked on almost every annotated scan
     assert metrics["mota"] > 0.85  # measured 0.885; the target of 0.9 needs the leg classifier
+
+
+def test_pdr_counts_the_steps_of_a_real_trace(shared_data, tmp_path):
+    trace = shared_data / "imu/oxford_step_counter/validation/user1_hand_1506421989895.csv"  # 326 true steps
+    out = run("pdr", str(trace), "-o", str(tmp_path / "pdr")).stdout
+    n = int(out.split()[0])
+    assert abs(n - 326) <= 326 * 0.03
+    steps = np.genfromtxt(tmp_path / "pdr" / "steps.csv", delimiter=",", names=True)
+    assert len(steps) == n
+    assert np.all(np.diff(steps["t_ns"]) > 0)
+
+
+def test_fit_step_model_needs_one_length_per_walk(shared_data, tmp_path):
+    trace = shared_data / "imu/oxford_step_counter/validation/user1_hand_1506421989895.csv"
+    result = subprocess.run([sys.executable, "-m", "fusiontrack", "fit-step-model", str(trace), str(trace),
+                             "-l", "100", "-o", str(tmp_path / "m.json")], capture_output=True, text=True)
+    assert result.returncode == 2
+    assert "--length: expected one per walk (2), got 1" in result.stderr
+
+
+def test_train_classifier_writes_a_model_that_loads(shared_data, tmp_path):
+    from fusiontrack.laser.classifier import ObjectClassifier
+
+    target = tmp_path / "model.json"
+    out = run("train-classifier", "-o", str(target), "--work", str(tmp_path / "work"), "--data", str(shared_data),
+              "--crowd-seconds", "12", "--road-seconds", "30", "--rounds", "20").stdout
+    assert "balanced accuracy" in out
+    model = ObjectClassifier.load(target)
+    assert model.classes == ("person", "bicycle", "car")
+    assert model.alpha.size == 20

@@ -481,6 +481,82 @@ def _bounds_of(recording: Path) -> Any:
 
 
 # --------------------------------------------------------------------------------------------------
+# train-classifier, pdr, fit-step-model
+# --------------------------------------------------------------------------------------------------
+
+
+@app.command(name="train-classifier")
+def train_classifier(
+    output: Annotated[Path | None, typer.Option("--output", "-o", help="Where to write the model (JSON); default: "
+                                                "the one shipped in the package, which the tracker uses.")] = None,
+    work: Annotated[Path, typer.Option(help="Folder for the simulated training recordings (reused if there).")]
+    = Path("out/classifier"),
+    data: Annotated[Path, typer.Option(help="The shared data folder (leg_tracker's training bags).")]
+    = Path("../shared/data"),
+    crowd_seconds: Annotated[float, typer.Option(help="Length of each simulated crowd / groups run.")] = 40.0,
+    road_seconds: Annotated[float, typer.Option(help="Length of each simulated road run.")] = 90.0,
+    rounds: Annotated[int, typer.Option(help="Boosting rounds (B18: 100).")] = 100,
+) -> None:
+    """Rebuild the person / bicycle / car classifier of laser segments (B18) from simulated and real data."""
+    from .laser.classifier import default_model_path, train_default
+
+    if rounds < 1:
+        raise ConfigError(f"--rounds: expected >= 1, got {rounds}")
+    with console.status("training") as status:
+        model, report = train_default(work, crowd_seconds=crowd_seconds, road_seconds=road_seconds, data_dir=data,
+                                      n_rounds=rounds, progress=lambda msg: status.update(msg))
+    target = output if output is not None else default_model_path()
+    model.save(target)
+    table = Table(show_edge=False, header_style="bold", title="held-out test (simulator seed 2; real: last 30 %)")
+    for col in ("source / class", "train", "test", "accuracy / recall"):
+        table.add_column(col, justify="right" if col != "source / class" else "left")
+    for name, r in report["sources"].items():
+        table.add_row(name, str(r["train"]), str(r["test"]), f"{r['accuracy']:.3f}")
+    for name, r in report["classes"].items():
+        table.add_row(f"class {name}", str(r["train"]), str(r["test"]), f"{r['recall']:.3f}")
+    console.print(table)
+    console.print(f"balanced accuracy {report['balanced_accuracy']:.3f}; wrote {target}")
+
+
+@app.command()
+def pdr(
+    source: Annotated[Path, typer.Argument(help="Phone IMU: a CSV (Oxford step-counter or generic "
+                                           "t,ax,ay,az[,gx,gy,gz]) or a recording with an Imu topic.")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Folder for steps.csv and trajectory.csv.")],
+    step_model: Annotated[Path | None, typer.Option(help="Step-length model (JSON) from "
+                                                    "`fusiontrack fit-step-model`.")] = None,
+    sensor: Annotated[str | None, typer.Option(help="Imu topic, when a recording holds several.")] = None,
+) -> None:
+    """Pedestrian dead reckoning from a phone's IMU (seed 002): steps, step lengths, headings, positions."""
+    from .inertial import pdr_from_file, write_pdr
+
+    result = pdr_from_file(source, step_model, sensor=sensor)
+    paths = write_pdr(result, output)
+    gyro = "" if result.has_gyro else " (no gyroscope: headings held constant)"
+    console.print(f"{result.n_steps} steps, {result.distance_m:.1f} m walked{gyro} -> "
+                  + ", ".join(str(p) for p in paths.values()))
+
+
+@app.command(name="fit-step-model")
+def fit_step_model(
+    walks: Annotated[list[Path], typer.Argument(help="IMU files of walks of known length (CSV or recording).")],
+    length: Annotated[list[float], typer.Option("--length", "-l", help="Length walked in each file, metres "
+                                                "(once per file, in order).")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Where to write the model (JSON).")],
+    subject: Annotated[str, typer.Option(help="Whose step model this is.")] = "default",
+) -> None:
+    """Learn a person's step length against step duration (C3) from walks of known length."""
+    from .inertial import step_model_from_files
+
+    if len(length) != len(walks):
+        raise ConfigError(f"--length: expected one per walk ({len(walks)}), got {len(length)}")
+    model = step_model_from_files(walks, length, subject=subject)
+    model.save(output)
+    console.print(f"step length = {model.intercept_m:.3f} m + {model.slope_mps:.3f} m/s x duration "
+                  f"(from {model.n_train} steps, rms {model.rms_m:.3f} m) -> {output}")
+
+
+# --------------------------------------------------------------------------------------------------
 # demo
 # --------------------------------------------------------------------------------------------------
 
