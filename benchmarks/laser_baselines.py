@@ -50,10 +50,9 @@ from rich.console import Console
 from rich.table import Table
 
 from fusiontrack.eval import evaluate_floor
-from fusiontrack.geometry import TransformTree
 from fusiontrack.io.recording import LASERSCAN, Recording
 from fusiontrack.io.sync import synchronize
-from fusiontrack.laser.detector import LaserPeopleDetector
+from fusiontrack.laser.detector import detector_for_recording
 from fusiontrack.sim.scenario import load_scenario
 from fusiontrack.sim.simulator import Simulation, simulate
 from fusiontrack.tracking.baseline import CVKalmanTracker
@@ -91,26 +90,8 @@ def detect_recording(path: Path, clock_corrections_ns: dict[str, int]) -> Frames
     :func:`fusiontrack.tracking.tracker.track_recording` with ``area_m`` given, ``time_source="header"``.
     """
     with Recording(path) as rec:
-        info = rec.topics()
-        lasers = [t for t, i in info.items() if i.msgtype == LASERSCAN]
-        tree = TransformTree()
-        if "/tf_static" in info:
-            for tf in rec.messages(["/tf_static"]):
-                tree.add_record(tf)
-        first: dict[str, Any] = {}
-        for scan in rec.messages(lasers):
-            first.setdefault(scan.sensor, scan)
-            if len(first) == len(lasers):
-                break
-        poses = {}
-        for sensor, scan in first.items():
-            pose = np.eye(4)
-            for frame in (scan.frame_id, sensor):
-                if frame and tree.has_path(frame, "world"):
-                    pose = tree.get(frame, "world")
-                    break
-            poses[sensor] = pose
-        detector = LaserPeopleDetector(poses)
+        lasers = [t for t, i in rec.topics().items() if i.msgtype == LASERSCAN]
+        detector, _ = detector_for_recording(rec, lasers)
         frames: Frames = []
         pending_t: int | None = None
         for scan in synchronize(rec.messages(lasers), clock_corrections_ns=clock_corrections_ns):

@@ -173,6 +173,7 @@ def hungarian(cost: np.ndarray, gate: float = np.inf) -> tuple[np.ndarray, np.nd
     rows, cols = linear_sum_assignment(np.where(allowed, cst, big))
     keep = allowed[rows, cols]
     rows, cols = rows[keep], cols[keep]
-    un_r = np.setdiff1d(np.arange(n_r), rows).astype(np.int64)
-    un_c = np.setdiff1d(np.arange(n_c), cols).astype(np.int64)
-    return np.stack([rows, cols], axis=1).astype(np.int64), un_r, un_c
+    free_r, free_c = np.ones(n_r, bool), np.ones(n_c, bool)
+    free_r[rows], free_c[cols] = False, False
+    return (np.stack([rows, cols], axis=1).astype(np.int64), np.flatnonzero(free_r).astype(np.int64),
+            np.flatnonzero(free_c).astype(np.int64))

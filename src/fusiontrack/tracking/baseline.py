@@ -26,9 +26,11 @@ from ..types import Detection, Event, Situation, TrackState
 from . import kalman
 from .association import hungarian
 from .situations import on_edge
-from .tracker import CandidateSet, area_polygon, detection_arrays
+from .tracker import CandidateSet, _fast_state, area_polygon
 
 __all__ = ["CVKalmanTracker"]
+
+_NONCORRELATED = str(Situation.NONCORRELATED)
 
 
 class CVKalmanTracker:
@@ -92,7 +94,7 @@ class CVKalmanTracker:
             return []
         dt = 0.0 if self._t is None else min((t_ns - self._t) / 1e9, 0.5)
         self._t = t_ns
-        z = detection_arrays(detections).centres
+        z = np.array([d.position_m for d in detections], dtype=np.float64).reshape(-1, 2)
         n, k = self._id.size, z.shape[0]
         if n and dt > 0:
             F, Q = kalman.cv_matrices(dt, self.q)
@@ -110,9 +112,9 @@ class CVKalmanTracker:
             self._seen[updated] = t_ns
         frame_ns = self.frame_s * 1e9
         dead = (t_ns - self._seen) > round(self.n_miss * frame_ns)
-        states = [TrackState(t_ns, self.sensor, int(self._id[i]), self._x[i, 0:2], self._x[i, 2:4],
-                             covariance=self._P[i], situation=Situation.NONCORRELATED,
-                             sensors=(self.sensor,) if updated[i] else ())
+        seen, none = (self.sensor,), ()
+        states = [_fast_state(t_ns, self.sensor, int(self._id[i]), self._x[i, 0:2], self._x[i, 2:4], _NONCORRELATED,
+                              seen if updated[i] else none, self._P[i])
                   for i in np.flatnonzero(~dead)]
         if dead.any():
             edge = self._edge(self._x[dead, 0:2])

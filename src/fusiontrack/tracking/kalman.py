@@ -35,9 +35,12 @@ def cv_matrices(dt_s: float, q: float) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError(f"dt_s: expected a time step >= 0 s, got {dt_s}")
     if not q >= 0.0:
         raise ValueError(f"q: expected >= 0, got {q}")
-    eye = np.eye(2)
-    F = np.block([[eye, dt_s * eye], [np.zeros((2, 2)), eye]])
-    Q = q * np.block([[dt_s**3 / 3.0 * eye, dt_s**2 / 2.0 * eye], [dt_s**2 / 2.0 * eye, dt_s * eye]])
+    F = np.eye(4)
+    F[0, 2] = F[1, 3] = dt_s
+    Q = np.zeros((4, 4))
+    Q[0, 0] = Q[1, 1] = q * dt_s**3 / 3.0
+    Q[0, 2] = Q[1, 3] = Q[2, 0] = Q[3, 1] = q * dt_s**2 / 2.0
+    Q[2, 2] = Q[3, 3] = q * dt_s
     return F, Q
 
 

@@ -590,20 +590,24 @@ def _max_pair_distance(points: np.ndarray) -> float:
 
 
 def _fast_state(t_ns: int, sensor: str, track_id: int, position: np.ndarray, velocity: np.ndarray, situation: str,
-                sensors: tuple[str, ...]) -> TrackState:
+                sensors: tuple[str, ...], covariance: np.ndarray | None = None) -> TrackState:
     """A :class:`TrackState` built without re-validating values the tracker already guarantees (hot path).
 
     Equivalent to ``TrackState(t_ns, sensor, track_id, position, velocity, situation=situation,
     sensors=sensors)`` for an int time and id, finite (2,) float arrays, a valid situation string and a
-    tuple of str: the arrays are copied and made read-only exactly as the constructor does.
+    tuple of str (and a finite (4, 4) ``covariance`` or None): the arrays are copied and made read-only
+    exactly as the constructor does.
     """
     st = object.__new__(TrackState)
     pos = np.array(position, dtype=np.float64)
     vel = np.array(velocity, dtype=np.float64)
     pos.setflags(write=False)
     vel.setflags(write=False)
+    if covariance is not None:
+        covariance = np.array(covariance, dtype=np.float64)
+        covariance.setflags(write=False)
     for name, value in (("t_ns", t_ns), ("sensor", sensor), ("track_id", track_id), ("position_m", pos),
-                        ("velocity_mps", vel), ("covariance", None), ("cls", _PERSON), ("situation", situation),
+                        ("velocity_mps", vel), ("covariance", covariance), ("cls", _PERSON), ("situation", situation),
                         ("sensors", sensors), ("score", 1.0), ("box_px", None), ("camera", "")):
         object.__setattr__(st, name, value)
     return st
