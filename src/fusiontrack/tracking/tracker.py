@@ -212,6 +212,11 @@ class TrackerParams:
         ones detected [RECON].
     appear_window_s : float
         A target born on the edge is reported ``appearing`` for this long.
+    appear_latency_s : float
+        A candidate first seen inside the area is still born on the edge (``appear``) when, at its velocity,
+        it was on the edge this long before: people coming through a door are first seen up to ~1 m in
+        (in the doorway the frame hides their legs from scanners along the wall; then they need a few scans
+        to stand out of the background) [RECON]. 0 keeps B7's rule (first position only).
     sensor : str
         ``TrackState.sensor``, ``Event.sensor`` and what ``TrackState.sensors`` names when a detection
         confirmed the track.
@@ -263,6 +268,7 @@ class TrackerParams:
     min_correlated_s: float = 0.0
     split_hold_s: float = 0.0
     appear_window_s: float = 1.0
+    appear_latency_s: float = 0.75
     sensor: str = "laser"
 
     def __post_init__(self) -> None:
@@ -277,7 +283,7 @@ class TrackerParams:
                         "init_feet_sigma_m", "init_heading_sigma_rad", "init_period_sigma_s", "init_stride_sigma_m",
                         "merged_q", "correlated_gap_s", "appear_window_s", "member_beta", "member_min_gap_m",
                         "split_min_m", "blob_radius_m", "single_s", "reacquire_speed_mps", "min_correlated_s",
-                        "split_hold_s", "reacquire_max_m", "edge_min_age_s")
+                        "split_hold_s", "reacquire_max_m", "edge_min_age_s", "appear_latency_s")
         for name in non_negative:
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
@@ -1075,6 +1081,10 @@ class LaserPeopleTracker:
             v0 = (cd.pos[k] - cd.first_pos[k]) / span
             heading = float(np.arctan2(v0[1], v0[0])) if np.hypot(*v0) * span >= 0.1 else float("nan")
             edge = bool(cd.edge[k])
+            if not edge and p.appear_latency_s > 0 and self.area_m is not None and np.isfinite(heading):
+                # First seen inside, walking in: where was it appear_latency_s before it was first seen?
+                back = cd.first_pos[k] - v0 * p.appear_latency_s
+                edge = bool(self._edge(back[None])[0])
             kind = "appear" if edge else "born"
             n_people = 1
             if (p.multi_fraction is not None and det.points and det.points[j] is not None
