@@ -164,6 +164,21 @@ def test_situations_sensors_and_events_of_a_birth_and_a_death_at_the_edge() -> N
     assert appear.t_end_ns > appear.t_ns
 
 
+@pytest.mark.parametrize(("latency_s", "kinds"), [(0.0, ["born"]), (0.75, ["appear"])])
+def test_a_walker_first_seen_a_metre_inside_came_in_from_the_edge(latency_s, kinds) -> None:
+    """Entering at x = 0 at 1.3 m/s but hidden for its first 0.7 s: first seen 0.9 m in, heading inwards."""
+    rng = np.random.default_rng(4)
+    trk = LaserPeopleTracker({"appear_latency_s": latency_s}, area_m=(0.0, 0.0, 10.0, 4.0), rng=0)
+    n = 3 * 25
+    pos, feet = _walk(n, np.array([0.0, 2.0]), np.zeros(n), 1.3, 1.4)
+    events = []
+    for k in range(n):
+        seen = pos[k, 0] >= 0.9
+        trk.step(k * FRAME_NS, [_detection(k * FRAME_NS, feet[k], rng)] if seen else [])
+        events += trk.events
+    assert [e.kind for e in events] == kinds
+
+
 def test_parameters_are_validated_by_name() -> None:
     with pytest.raises(ConfigError, match="n_particles"):
         TrackerParams(n_particles=0)
