@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-dev
 
-.PHONY: demo test lint bench clean install
+.PHONY: demo test lint bench bench-io bench-laser bench-camera bench-imu bench-baselines clean install
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -26,9 +26,28 @@ lint: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/python -m fusiontrack demo -o out/demo
 
-bench: $(STAMP)
+# Benchmarks print tables; each group takes a few minutes on 2 cores. `make bench` runs them all but the
+# Stone Soup comparison, which needs an optional extra (`make bench-baselines` installs it).
+bench: bench-io bench-laser bench-camera bench-imu
+
+bench-io: $(STAMP)
 	$(BIN)/python benchmarks/read_throughput.py
 	$(BIN)/python benchmarks/simulate.py
+
+bench-laser: $(STAMP)
+	$(BIN)/python benchmarks/laser_detection.py
+	$(BIN)/python benchmarks/tracking_step.py
+	$(BIN)/python benchmarks/laser_people.py
+
+bench-camera: $(STAMP)
+	$(BIN)/python benchmarks/camera.py
+
+bench-imu: $(STAMP)
+	$(BIN)/python benchmarks/pdr_steps.py
+
+bench-baselines: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[dev,stonesoup]"
+	$(BIN)/python benchmarks/laser_baselines.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache build src/*.egg-info
