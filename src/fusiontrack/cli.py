@@ -316,12 +316,16 @@ def simulate(
 # track, eval
 # --------------------------------------------------------------------------------------------------
 
-PIPELINES = {"people-laser": "people tracked with 2D lasers (seed 001's laser side)"}
+PIPELINES = {
+    "people-laser": "people tracked with 2D lasers (seed 001's laser side)",
+    "people-camera": "people tracked in one camera's images: foreground blobs, or a MOTChallenge detection file",
+}
 
 
 @app.command()
 def track(
-    recordings: Annotated[list[Path], typer.Argument(help="Recording(s) with LaserScan topics.")],
+    recordings: Annotated[list[Path], typer.Argument(help="Recording(s) with LaserScan topics; for "
+                                                          "people-camera a video file or a recording with images.")],
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder for tracks, events and video.")],
     pipeline: Annotated[str, typer.Option(help=f"One of: {', '.join(PIPELINES)}.")] = "people-laser",
     config: Annotated[Path | None, typer.Option("--config", "-c", help="Pipeline file: sensors, topics, clock "
@@ -329,20 +333,52 @@ def track(
     tracker_kind: Annotated[str, typer.Option("--tracker", help="pf (two-feet particle filters) or kalman "
                                               "(constant-velocity baseline).")] = "pf",
     time_source: Annotated[str, typer.Option("--time", help="header (capture stamps) or log (recorder).")] = "header",
-    video: Annotated[bool, typer.Option(help="Also write a bird's-eye video with the tracks.")] = True,
+    video: Annotated[bool, typer.Option(help="Also write a bird's-eye video with the tracks (people-camera: the "
+                                        "overlay video).")] = True,
     seed: Annotated[int, typer.Option(help="Random seed of the particle filters.")] = 0,
     area: Annotated[str, typer.Option(help="Covered area, where people appear and leave: 'auto' (from the "
                                       "learnt laser backgrounds), 'none' (a moving scanner: no edge) or "
                                       "x_min,y_min,x_max,y_max in metres.")] = "auto",
+    detections: Annotated[Path | None, typer.Option(help="people-camera: MOTChallenge detections (det.txt, "
+                                                    "frames 1-based in image order) instead of foreground "
+                                                    "blobs.")] = None,
+    detection_scale: Annotated[float, typer.Option(help="people-camera: multiply the detection boxes by this "
+                                                   "(0.625 for 768x576 boxes on a 480x360 video).")] = 1.0,
+    min_score: Annotated[float | None, typer.Option(help="people-camera: drop detections with a lower "
+                                                    "confidence.")] = None,
+    camera_topic: Annotated[str | None, typer.Option(help="people-camera: the recording's image topic (default: "
+                                                     "its only one).")] = None,
+    max_frames: Annotated[int | None, typer.Option(help="people-camera: stop after this many frames.")] = None,
 ) -> None:
-    """Track people in a recording; writes tracks.csv, tracks.jsonl (states + events) and tracks.mp4."""
+    """Track people in a recording; writes tracks.csv, tracks.jsonl (states + events) and tracks.mp4.
+
+    With --pipeline people-camera: tracks people in a video or a recording's camera, from the foreground
+    blobs or from --detections; writes tracks.csv, tracks.jsonl, tracks_mot.txt (image boxes, MOTChallenge
+    format) and overlay.mp4 (boxes, ids, foreground contours). Floor positions need a calibrated camera
+    (a recording's CameraInfo and /tf_static); otherwise x, y are NaN.
+    """
     from .io.tracks import write_jsonl, write_tracks_csv
-    from .tracking.tracker import track_recording
 
     if pipeline not in PIPELINES:
         raise ConfigError(f"--pipeline: expected one of {', '.join(PIPELINES)}, got {pipeline!r}")
     if time_source not in ("header", "log"):
         raise ConfigError(f"--time: expected 'header' or 'log', got {time_source!r}")
+    if pipeline == "people-camera":
+        if config is not None:
+            raise ConfigError("--config: the people-camera pipeline takes no pipeline file yet (its camera comes "
+                              "from the recording's CameraInfo and /tf_static)")
+        _track_camera(recordings, output, detections=detections, detection_scale=detection_scale,
+                      min_score=min_score, camera_topic=camera_topic, max_frames=max_frames,
+                      time_source=time_source, video=video)
+        return
+    camera_only = {"--detections": detections is not None, "--detection-scale": detection_scale != 1.0,
+                   "--min-score": min_score is not None, "--camera-topic": camera_topic is not None,
+                   "--max-frames": max_frames is not None}
+    if any(camera_only.values()):
+        given = ", ".join(k for k, v in camera_only.items() if v)
+        raise ConfigError(f"{given}: only for --pipeline people-camera (got --pipeline {pipeline})")
+    from .tracking.tracker import track_recording
+
     cfg = _load_config(config)
     topics = [s.topic for s in cfg.sensors.values() if s.kind == "laser"] or None
     area_m: Any = {"auto": "auto", "none": None}.get(area)
@@ -378,6 +414,45 @@ def track(
 
         drawn = render_preview(recordings, output / "tracks.mp4", tracks=states)
         console.print(f"video: {output / 'tracks.mp4'} ({drawn.frames} frames)")
+
+
+def _track_camera(sources: list[Path], output: Path, *, detections: Path | None, detection_scale: float,
+                  min_score: float | None, camera_topic: str | None, max_frames: int | None, time_source: str,
+                  video: bool) -> None:
+    """``track --pipeline people-camera``: the vision-only tracker over a video or a recording's camera."""
+    from .errors import RecordingError
+    from .io.tracks import write_jsonl, write_mot, write_tracks_csv
+    from .vision.people import VIDEO_SUFFIXES, track_camera
+
+    videos = [p for p in sources if p.suffix.lower() in VIDEO_SUFFIXES]
+    if videos and len(sources) > 1:
+        raise ConfigError(f"people-camera: one video at a time, or recordings only (got {len(sources)} inputs "
+                          f"including {videos[0]})")
+    if detections is not None and not detections.is_file():
+        raise RecordingError(f"--detections {detections}: no such file (expected MOTChallenge rows "
+                             "frame,-1,left,top,width,height,conf,...)")
+    output.mkdir(parents=True, exist_ok=True)
+    overlay = output / "overlay.mp4" if video else None
+    with progress() as bar:
+        task = bar.add_task("tracking (camera)", total=1.0)
+        states, events, stats = track_camera(
+            sources, detections=detections, detection_scale=detection_scale,
+            min_score=-float("inf") if min_score is None else min_score, camera_topic=camera_topic,
+            overlay=overlay, max_frames=max_frames, time_source=time_source,
+            progress=lambda f: bar.update(task, completed=f))
+    write_tracks_csv(output / "tracks.csv", states)
+    write_jsonl(output / "tracks.jsonl", [*states, *events])
+    write_mot(output / "tracks_mot.txt", states, frame_of=stats.frame_of())
+    kinds: dict[str, int] = {}
+    for ev in events:
+        kinds[ev.kind] = kinds.get(ev.kind, 0) + 1
+    source = f"detections {detections.name}" if detections is not None else "foreground blobs"
+    floor = "floor positions from the calibrated camera" if stats.calibrated else "no camera calibration: x, y NaN"
+    console.print(f"{stats.n_tracks} tracks, {len(states)} states over {stats.n_frames} frames of {stats.width}x"
+                  f"{stats.height} from {source}, events {kinds or 'none'}; {stats.fps:.1f} fps "
+                  f"(decode + detection + tracking); {floor} -> {output}")
+    if overlay is not None:
+        console.print(f"overlay: {overlay} ({stats.n_frames} frames)")
 
 
 def _read_tracks(path: Path) -> tuple[list[Any], list[Any]]:
