@@ -11,12 +11,37 @@
   boxes, floor positions through a calibrated camera), fed by the blobs or a MOT detection file;
   :func:`track_camera` runs it over a video or a recording's camera.
 * :mod:`~fusiontrack.vision.overlay` — the overlay video: boxes, ids, foreground contours, frame number.
+* :mod:`~fusiontrack.vision.patches` — seed 001's random patches in a box (B12) and their RGB + edge
+  orientation features from integral images (B13).
+* :mod:`~fusiontrack.vision.appearance` — per-target online boosted classifiers keeping the K best learners
+  (B14, B15), score maps and their particle likelihood (B16), identities at a split (B17):
+  :class:`AppearanceBank`.
 """
 
+from fusiontrack.vision.appearance import (
+    AppearanceBank,
+    AppearanceClassifier,
+    AppearanceParams,
+    BoostedClassifier,
+    BoostParams,
+    BoostUpdate,
+    ScoreMap,
+    assign_identities,
+    interacting_region,
+    score_map_likelihood,
+)
 from fusiontrack.vision.blob_tracker import BlobEvent, BlobTracker, BlobTrackerParams, NodeLabel, TrackedObject
 from fusiontrack.vision.blobs import BlobParams, Blobs, blob_contours, blob_histograms, clean_mask, extract_blobs
 from fusiontrack.vision.foreground import ForegroundModel, ForegroundParams, ForegroundResult
 from fusiontrack.vision.overlay import OverlayRenderer, draw_overlay, id_colour
+from fusiontrack.vision.patches import (
+    FeatureParams,
+    Patches,
+    PatchParams,
+    extract_features,
+    patch_features,
+    sample_patches,
+)
 from fusiontrack.vision.people import (
     CameraPeopleTracker,
     CameraRunStats,
@@ -36,6 +61,9 @@ from fusiontrack.vision.shadows import PixelLabel, ShadowParams, brightness_chro
 from fusiontrack.vision.stopped import AugmentedMask, AugmentedMaskParams
 
 __all__ = [
+    "AppearanceBank",
+    "AppearanceClassifier",
+    "AppearanceParams",
     "AugmentedMask",
     "AugmentedMaskParams",
     "BlobEvent",
@@ -43,18 +71,26 @@ __all__ = [
     "BlobTracker",
     "BlobTrackerParams",
     "Blobs",
+    "BoostParams",
+    "BoostUpdate",
+    "BoostedClassifier",
     "CameraPeopleTracker",
     "CameraRunStats",
     "CameraTrackerParams",
+    "FeatureParams",
     "ForegroundModel",
     "ForegroundParams",
     "ForegroundResult",
     "FrameResult",
     "NodeLabel",
     "OverlayRenderer",
+    "PatchParams",
+    "Patches",
     "PixelLabel",
+    "ScoreMap",
     "ShadowParams",
     "TrackedObject",
+    "assign_identities",
     "blob_contours",
     "blob_detections",
     "blob_histograms",
@@ -67,9 +103,14 @@ __all__ = [
     "complete_person_boxes",
     "draw_overlay",
     "extract_blobs",
+    "extract_features",
     "floor_positions",
     "id_colour",
+    "interacting_region",
     "mot_detections",
+    "patch_features",
+    "sample_patches",
+    "score_map_likelihood",
     "shadow_highlight_labels",
     "track_camera",
 ]
