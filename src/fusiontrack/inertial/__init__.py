@@ -30,6 +30,7 @@ from fusiontrack.inertial.preprocess import (
     resample_uniform,
     vertical_acceleration,
 )
+from fusiontrack.inertial.projection import InertialProjection, fit_inertial_projection, projection_from_pdr
 from fusiontrack.inertial.step_length import DEFAULT_STEP_MODEL, StepLengthModel, fit_step_model, load_step_model
 from fusiontrack.inertial.steps import StepDetectorParams, Steps, detect_steps, step_signal
 
@@ -38,6 +39,7 @@ __all__ = [
     "Correction",
     "ImuCalibration",
     "ImuStream",
+    "InertialProjection",
     "PdrResult",
     "StepDetectorParams",
     "StepLengthModel",
@@ -52,6 +54,7 @@ __all__ = [
     "detect_still_period",
     "euler_rate_matrix",
     "fit_correction",
+    "fit_inertial_projection",
     "fit_step_model",
     "gravity_to_level",
     "integrate_attitude",
@@ -60,6 +63,7 @@ __all__ = [
     "load_imu",
     "load_step_model",
     "pdr_from_file",
+    "projection_from_pdr",
     "resample_uniform",
     "run_pdr",
     "step_headings",

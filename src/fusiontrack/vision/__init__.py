@@ -16,6 +16,10 @@
 * :mod:`~fusiontrack.vision.appearance` — per-target online boosted classifiers keeping the K best learners
   (B14, B15), score maps and their particle likelihood (B16), identities at a split (B17):
   :class:`AppearanceBank`.
+* :mod:`~fusiontrack.vision.rgbd` — seed 002's RGB-D particle filter (HSV histograms x depth shape, C6),
+  the target's world position from depth (C7) and a depth person detector.
+* :mod:`~fusiontrack.vision.compressive` — compressive tracking (C10) with the inertial consistency test
+  (C11) and the multi-template buffer that recovers from failures (C12).
 """
 
 from fusiontrack.vision.appearance import (
@@ -32,6 +36,13 @@ from fusiontrack.vision.appearance import (
 )
 from fusiontrack.vision.blob_tracker import BlobEvent, BlobTracker, BlobTrackerParams, NodeLabel, TrackedObject
 from fusiontrack.vision.blobs import BlobParams, Blobs, blob_contours, blob_histograms, clean_mask, extract_blobs
+from fusiontrack.vision.compressive import (
+    CompressiveParams,
+    CompressiveTracker,
+    MultiTemplateParams,
+    MultiTemplateResult,
+    MultiTemplateTracker,
+)
 from fusiontrack.vision.foreground import ForegroundModel, ForegroundParams, ForegroundResult
 from fusiontrack.vision.overlay import OverlayRenderer, draw_overlay, id_colour
 from fusiontrack.vision.patches import (
@@ -57,6 +68,14 @@ from fusiontrack.vision.people import (
     mot_detections,
     track_camera,
 )
+from fusiontrack.vision.rgbd import (
+    RgbdFix,
+    RgbdParticleFilter,
+    RgbdPfParams,
+    detect_people_rgbd,
+    remove_floor,
+    target_position,
+)
 from fusiontrack.vision.shadows import PixelLabel, ShadowParams, brightness_chromaticity, shadow_highlight_labels
 from fusiontrack.vision.stopped import AugmentedMask, AugmentedMaskParams
 
@@ -77,16 +96,24 @@ __all__ = [
     "CameraPeopleTracker",
     "CameraRunStats",
     "CameraTrackerParams",
+    "CompressiveParams",
+    "CompressiveTracker",
     "FeatureParams",
     "ForegroundModel",
     "ForegroundParams",
     "ForegroundResult",
     "FrameResult",
+    "MultiTemplateParams",
+    "MultiTemplateResult",
+    "MultiTemplateTracker",
     "NodeLabel",
     "OverlayRenderer",
     "PatchParams",
     "Patches",
     "PixelLabel",
+    "RgbdFix",
+    "RgbdParticleFilter",
+    "RgbdPfParams",
     "ScoreMap",
     "ShadowParams",
     "TrackedObject",
@@ -101,6 +128,7 @@ __all__ = [
     "camera_truth_boxes",
     "clean_mask",
     "complete_person_boxes",
+    "detect_people_rgbd",
     "draw_overlay",
     "extract_blobs",
     "extract_features",
@@ -109,8 +137,10 @@ __all__ = [
     "interacting_region",
     "mot_detections",
     "patch_features",
+    "remove_floor",
     "sample_patches",
     "score_map_likelihood",
     "shadow_highlight_labels",
+    "target_position",
     "track_camera",
 ]
