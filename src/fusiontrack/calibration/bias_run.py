@@ -1,0 +1,354 @@
+"""Run seed 000's adaptive horizontal bias over a recording (ALGORITHMS.md A0 data flow, A10).
+
+Camera frames go through foreground (A1–A3), blobs (A4) and the blob tracker (A5); every laser scan feeds
+the A7 background; each frame's tracked objects update :class:`~fusiontrack.calibration.bias.
+HorizontalBiasEstimator`. Images are held back until every laser has a scan at least as late, so each frame
+is paired with the nearest scan on either side.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from fusiontrack.errors import RecordingError
+from fusiontrack.geometry import PinholeCamera, TransformTree, invert_transform
+from fusiontrack.io.recording import Recording
+from fusiontrack.io.sync import with_time
+from fusiontrack.types import CameraInfo, GroundTruth, Image, LaserScan
+from fusiontrack.vision.blob_tracker import BlobTracker, BlobTrackerParams
+from fusiontrack.vision.blobs import BlobParams, Blobs, blob_histograms, extract_blobs
+from fusiontrack.vision.foreground import ForegroundModel, ForegroundParams
+from fusiontrack.vision.people import camera_from_recording
+
+from .bias import BiasHistory, BiasParams, BiasStep, HorizontalBiasEstimator
+
+__all__ = [
+    "BiasInputs",
+    "BiasRun",
+    "FrameObjects",
+    "bias_from_recording",
+    "object_centroids",
+    "open_bias_inputs",
+    "write_bias_history",
+]
+
+log = logging.getLogger(__name__)
+
+BoxSource = Literal["blobs", "truth"]
+PIXEL_EDGE_OFFSET_PX = 0.5
+"""Blob boxes (ALGORITHMS.md A4) are on pixel edges, pixel ``k`` covering ``[k, k + 1)``; in the camera model's
+(OpenCV's) coordinates pixel ``k`` is centred on ``k``, so a blob box is moved by -0.5 px before use."""
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class BiasRun:
+    """The result of :func:`bias_from_recording`.
+
+    Attributes
+    ----------
+    history : BiasHistory
+        The bias after every camera frame.
+    steps : tuple of BiasStep
+        Every frame's update and fused objects.
+    camera : PinholeCamera
+        The camera as calibrated in the recording (what the bias corrects).
+    corrected_camera : PinholeCamera
+        ``camera`` turned by the final bias.
+    lasers : tuple of str
+        The lasers used.
+    """
+
+    history: BiasHistory
+    steps: tuple[BiasStep, ...]
+    camera: PinholeCamera
+    corrected_camera: PinholeCamera
+    lasers: tuple[str, ...]
+
+    @property
+    def bias_rad(self) -> float:
+        """The final bias."""
+        return float(self.history.bias_rad[-1]) if len(self.history) else 0.0
+
+
+def _transform_tree(rec: Recording) -> TransformTree:
+    tree = TransformTree()
+    topics = rec.topics()
+    for tf_topic in ("/tf_static", "/tf"):
+        if tf_topic in topics:
+            for tf in rec.messages([tf_topic]):
+                tree.add_record(tf)
+    return tree
+
+
+def _camera_info(rec: Recording, camera: str) -> CameraInfo | None:
+    topics = rec.topics()
+    infos = [t for t, i in topics.items() if i.msgtype == "sensor_msgs/msg/CameraInfo" and rec.sensor_of(t) == camera]
+    return next((m for m in rec.messages(infos[:1]) if isinstance(m, CameraInfo)), None) if infos else None
+
+
+def _setup(rec: Recording, camera: str, lasers: Sequence[str] | None, world_frame: str, cam2world: Any,
+           laser2world: Mapping[str, Any] | None) -> tuple[PinholeCamera, str, dict[str, np.ndarray], dict[str, str]]:
+    topics = rec.topics()
+    images = [t for t, i in topics.items() if i.msgtype == "sensor_msgs/msg/Image" and rec.sensor_of(t) == camera]
+    if not images:
+        raise RecordingError(f"{rec.paths[0]}: no sensor_msgs/Image topic of camera {camera!r}; image topics: "
+                             f"{[t for t, i in topics.items() if i.msgtype == 'sensor_msgs/msg/Image']}")
+    if cam2world is None:
+        cam = camera_from_recording(rec, camera, camera, world_frame=world_frame)
+    else:
+        info = _camera_info(rec, camera)
+        cam = None if info is None else PinholeCamera.from_camera_info(info, invert_transform(cam2world))
+    if cam is None:
+        raise RecordingError(f"{rec.paths[0]}: camera {camera!r} needs a CameraInfo and a pose (given, or in "
+                             f"/tf_static as {camera}_calibrated or {camera} relative to {world_frame!r})")
+    scan_topics = {rec.sensor_of(t): t for t, i in topics.items() if i.msgtype == "sensor_msgs/msg/LaserScan"}
+    wanted = sorted(scan_topics) if lasers is None else list(lasers)
+    missing = [name for name in wanted if name not in scan_topics]
+    if missing or not wanted:
+        raise RecordingError(f"{rec.paths[0]}: laser(s) {missing or wanted} not found; lasers: {sorted(scan_topics)}")
+    given = dict(laser2world or {})
+    tree = _transform_tree(rec) if any(name not in given for name in wanted) else TransformTree()
+    poses = {}
+    for name in wanted:
+        if name in given:
+            poses[name] = np.asarray(given[name], np.float64)
+            continue
+        frame = f"{name}_calibrated" if tree.has_path(f"{name}_calibrated", world_frame) else name
+        if not tree.has_path(frame, world_frame):
+            raise RecordingError(f"{rec.paths[0]}: no transform from laser {name!r} to {world_frame!r} in /tf_static")
+        poses[name] = tree.get(frame, world_frame)
+    return cam, images[0], poses, {name: scan_topics[name] for name in wanted}
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class FrameObjects:
+    """The tracked objects of one camera frame, ready for :meth:`HorizontalBiasEstimator.update`.
+
+    Attributes
+    ----------
+    t_ns : int
+        Frame time on the common clock.
+    boxes_px : (n, 4) float64
+        Boxes in the camera model's pixel coordinates (pixel centres on integers).
+    object_ids : (n,) int64
+    usable : (n,) bool
+        Alone (not in a group) and seen in this frame.
+    centres_px : (n, 2) float64
+        Pixel centroid of each object's blobs (NaN: use the box centre).
+    """
+
+    t_ns: int
+    boxes_px: np.ndarray
+    object_ids: np.ndarray
+    usable: np.ndarray
+    centres_px: np.ndarray
+
+    def update(self, estimator: HorizontalBiasEstimator) -> BiasStep:
+        """Feed this frame to ``estimator``."""
+        return estimator.update(self.t_ns, self.boxes_px, self.object_ids, self.usable, self.centres_px)
+
+
+def object_centroids(object_boxes_px: np.ndarray, blobs: Blobs, tol_px: float = 0.5) -> np.ndarray:
+    """Area-weighted pixel centroid of the blobs inside each object box (A5 boxes are unions of blob boxes).
+
+    Parameters
+    ----------
+    object_boxes_px : (n, 4) float
+        Object boxes on pixel edges, as the blob tracker gives them.
+    blobs : Blobs
+        The frame's blobs (A4).
+    tol_px : float
+        Slack of the "inside" test.
+
+    Returns
+    -------
+    (n, 2) float64
+        ``(u, v)`` with pixel centres on integers; NaN for an object without a blob inside its box.
+    """
+    ob = np.asarray(object_boxes_px, np.float64).reshape(-1, 4)
+    bb = blobs.boxes_px
+    inside = np.all(bb[None, :, :2] >= ob[:, None, :2] - tol_px, axis=2) & \
+        np.all(bb[None, :, 2:] <= ob[:, None, 2:] + tol_px, axis=2)
+    w = inside * blobs.areas_px[None, :].astype(np.float64)
+    total = w.sum(axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(total > 0, (w @ blobs.centroids_px) / total, np.nan)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class BiasInputs:
+    """What the bias needs from a recording: the camera, the laser poses and a time-ordered input stream.
+
+    Iterating yields :class:`~fusiontrack.types.LaserScan` (stamps on the common clock) and
+    :class:`FrameObjects`; a frame comes after every laser has a scan at least as late, so the nearest scan on
+    either side of it is known. The vision path (A1–A5) runs during the iteration; iterate once and feed
+    several estimators to compare parameters on the same boxes.
+    """
+
+    path: Path
+    camera: PinholeCamera
+    lasers: dict[str, np.ndarray]
+    image_topic: str
+    scan_topics: dict[str, str]
+    camera_name: str
+    boxes: BoxSource
+    offsets_ns: dict[str, int]
+    foreground: ForegroundParams | None
+    blob: BlobParams | None
+    tracker: BlobTrackerParams | None
+
+    def estimator(self, params: BiasParams | None = None) -> HorizontalBiasEstimator:
+        """A fresh estimator for this camera and these lasers."""
+        return HorizontalBiasEstimator(self.camera, self.lasers, params)
+
+    def __iter__(self) -> Iterator[LaserScan | FrameObjects]:
+        truth_topic = f"/ground_truth/{self.camera_name}"
+        with Recording(self.path) as rec:
+            frame_topic = truth_topic if self.boxes == "truth" else self.image_topic
+            if frame_topic not in rec.topics():
+                raise RecordingError(f"{self.path}: no topic {frame_topic} for boxes={self.boxes!r}")
+            fg = ForegroundModel(self.foreground)
+            tracker = BlobTracker(self.tracker)
+            last_scan = dict.fromkeys(self.scan_topics, -(2**62))
+            pending: deque[Image | GroundTruth] = deque()
+            cam_offset = self.offsets_ns.get(self.camera_name, 0)
+
+            def frame_time(msg: Image | GroundTruth) -> int:
+                return msg.t_ns - cam_offset if isinstance(msg, Image) else msg.t_ns
+
+            def objects(msg: Image | GroundTruth) -> FrameObjects:
+                t_ns = frame_time(msg)
+                if isinstance(msg, GroundTruth):  # the simulator's boxes in the true image (a reference run)
+                    box = np.asarray(msg.attributes.get("box_px", np.zeros((0, 4))), np.float64).reshape(-1, 4)
+                    vis = np.asarray(msg.attributes.get("visibility", np.ones(len(box))), np.float64)
+                    ok = np.all(np.isfinite(box), axis=1) & (vis > 0.5)
+                    ok[ok] &= (box[ok, 2] > box[ok, 0]) & (box[ok, 3] > box[ok, 1])
+                    return FrameObjects(t_ns, box[ok], msg.ids[ok], np.ones(int(ok.sum()), bool),
+                                        np.full((int(ok.sum()), 2), np.nan))
+                bl = extract_blobs(fg.apply(msg).mask, self.blob)
+                objs = tracker.step(bl, blob_histograms(msg.pixels, bl) if msg.encoding == "bgr8" else None, t_ns)
+                edge_boxes = np.array([o.box_px for o in objs]).reshape(-1, 4)
+                return FrameObjects(t_ns, edge_boxes - PIXEL_EDGE_OFFSET_PX,
+                                    np.array([o.object_id for o in objs], np.int64),
+                                    np.array([not o.in_group and o.missed == 0 for o in objs], bool),
+                                    object_centroids(edge_boxes, bl))
+
+            for msg in rec.messages([frame_topic, *self.scan_topics.values()]):
+                if isinstance(msg, LaserScan):
+                    t = msg.t_ns - self.offsets_ns.get(msg.sensor, 0)
+                    msg = msg if t == msg.t_ns else with_time(msg, t)
+                    yield msg
+                    last_scan[msg.sensor] = t
+                    ready = min(last_scan.values())
+                    while pending and frame_time(pending[0]) <= ready:
+                        yield objects(pending.popleft())
+                elif isinstance(msg, Image | GroundTruth):
+                    pending.append(msg)
+            while pending:
+                yield objects(pending.popleft())
+
+
+def open_bias_inputs(path: str | Path, camera: str = "camera_0", lasers: Sequence[str] | None = None, *,
+                     boxes: BoxSource = "blobs", clock_offsets_ms: Mapping[str, float] | None = None,
+                     world_frame: str = "world", cam2world: Any = None, laser2world: Mapping[str, Any] | None = None,
+                     foreground: ForegroundParams | None = None, blob: BlobParams | None = None,
+                     tracker: BlobTrackerParams | None = None) -> BiasInputs:
+    """Read a recording's calibration and prepare its input stream for the bias (see :func:`bias_from_recording`).
+
+    ``cam2world`` (4, 4) and ``laser2world`` (name -> (4, 4)) replace the poses in the recording's ``/tf_static``
+    (e.g. those of a pipeline file); ``foreground``, ``blob`` and ``tracker`` are the A1–A5 parameters.
+
+    Raises
+    ------
+    RecordingError
+        The recording lacks the camera, its calibration, the lasers or their poses.
+    """
+    if boxes not in ("blobs", "truth"):
+        raise ValueError(f"boxes: expected 'blobs' or 'truth', got {boxes!r}")
+    offsets = {k: round(float(v) * 1e6) for k, v in (clock_offsets_ms or {}).items()}
+    with Recording(path) as rec:
+        cam, image_topic, poses, scan_topics = _setup(rec, camera, lasers, world_frame, cam2world, laser2world)
+    return BiasInputs(Path(path), cam, poses, image_topic, scan_topics, camera, boxes, offsets, foreground, blob,
+                      tracker)
+
+
+def bias_from_recording(path: str | Path, camera: str = "camera_0", lasers: Sequence[str] | None = None,
+                        params: BiasParams | None = None, *, boxes: BoxSource = "blobs",
+                        clock_offsets_ms: Mapping[str, float] | None = None, world_frame: str = "world",
+                        cam2world: Any = None, laser2world: Mapping[str, Any] | None = None,
+                        progress: Callable[[BiasStep], None] | None = None) -> BiasRun:
+    """Estimate a camera's horizontal bias against the lasers of a recording (seed 000, ALGORITHMS.md A0–A10).
+
+    Parameters
+    ----------
+    path : str or Path
+        A recording with the camera's images, its ``CameraInfo``, laser scans and ``/tf_static`` poses (the
+        camera's believed pose is ``<camera>_calibrated`` when present, as the simulator writes it).
+    camera : str
+        Sensor name of the camera.
+    lasers : sequence of str, optional
+        Sensor names of the lasers to use (default: all).
+    params : BiasParams, optional
+    boxes : {"blobs", "truth"}
+        Object boxes from the camera path (A1–A5), or from ``/ground_truth/<camera>`` (the simulator's boxes,
+        for reference runs that isolate the laser side).
+    clock_offsets_ms : mapping of sensor -> float, optional
+        How far each sensor's stamps run ahead of the common clock (the pipeline file's ``clock_offset_ms``).
+    world_frame : str
+    cam2world : (4, 4) float, optional
+        The camera's believed pose (default: from the recording).
+    laser2world : mapping of laser name -> (4, 4) float, optional
+        Laser poses (default: from the recording).
+    progress : callable, optional
+        Called with every step.
+
+    Returns
+    -------
+    BiasRun
+
+    Raises
+    ------
+    RecordingError
+        The recording lacks the camera, its calibration, the lasers or their poses.
+    """
+    inputs = open_bias_inputs(path, camera, lasers, boxes=boxes, clock_offsets_ms=clock_offsets_ms,
+                              world_frame=world_frame, cam2world=cam2world, laser2world=laser2world)
+    est = inputs.estimator(params)
+    steps = []
+    for item in inputs:
+        if isinstance(item, LaserScan):
+            est.observe_scan(item)
+            continue
+        step = item.update(est)
+        steps.append(step)
+        if progress is not None:
+            progress(step)
+    if not any(s.n_used for s in steps):
+        log.warning("%s: the bias was never updated (no object matched a laser cluster)", path)
+    return BiasRun(est.history, tuple(steps), est.camera, est.corrected_camera, est.lasers)
+
+
+def write_bias_history(path: str | Path, history: BiasHistory) -> Path:
+    """Write the bias history as CSV: ``t_ns, bias_deg, n_used, margin_deg``, one row per camera frame.
+
+    Raises
+    ------
+    RecordingError
+        The file cannot be written.
+    """
+    path = Path(path)
+    rows = np.column_stack([np.degrees(history.bias_rad), history.n_used, np.degrees(history.margin_rad)])
+    lines = ["t_ns,bias_deg,n_used,margin_deg"] + [f"{t},{b:.6f},{int(n)},{m:.4f}"
+                                                  for t, (b, n, m) in zip(history.t_ns.tolist(), rows, strict=True)]
+    try:
+        path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    except OSError as err:
+        raise RecordingError(f"{path}: cannot write the bias history: {err.strerror}") from err
+    return path
