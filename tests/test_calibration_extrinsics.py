@@ -250,3 +250,27 @@ def test_calibration_edges_name_the_problem(scene, tmp_path):
     new = write_pose_to_pipeline(tmp_path / "new.toml", "camera_0", Pose(z=3.0), kind="camera", topic="/c",
                                  create=True)
     assert new.sensors["camera_0"].pose.z == 3.0
+
+
+def test_calibrate_command_line(scene, tmp_path):
+    """`fusiontrack calibrate CAMERA -c PIPELINE --points CSV --intrinsics ...` rewrites the camera's pose."""
+    import subprocess
+    import sys
+
+    pipeline = tmp_path / "pipeline.toml"
+    pipeline.write_text(PIPELINE, encoding="utf-8")
+    csv = tmp_path / "points.csv"
+    rows = "\n".join(",".join(f"{v:.6f}" for v in row) for row in np.hstack([scene["points"], scene["pixels"]]))
+    csv.write_text("x_m,y_m,z_m,u_px,v_px\n" + rows + "\n", encoding="utf-8")
+    intr = ",".join(f"{v:.9g}" for v in [K[0, 0], K[1, 1], K[0, 2], K[1, 2], *np.ravel(DIST)])
+    cmd = [sys.executable, "-m", "fusiontrack", "calibrate", "camera_0", "-c", str(pipeline), "--points", str(csv),
+           "--reference", "laser_0", "--intrinsics", intr]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "written to" in out.stdout
+    true = camera_pose_from_cam2world(scene["camera"].cam2world)
+    got = load_config(pipeline).sensors["camera_0"].pose
+    assert abs(got.yaw_deg - true.yaw_deg) < 0.01
+    bad = subprocess.run(cmd[:7], capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2
+    assert "exactly one of --points CSV or --adaptive RECORDING" in bad.stderr

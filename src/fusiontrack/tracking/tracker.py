@@ -640,6 +640,16 @@ class LaserPeopleTracker:
         may be set later through :attr:`area_m` (e.g. once the scanners' backgrounds are learnt).
     rng : numpy.random.Generator or int, optional
         Source of all randomness (particles, resampling).
+    extra_log_likelihood : callable, optional
+        Fusion hook (seed 001 B16; :mod:`fusiontrack.fusion`): ``f(t_ns, track_ids (n,), centres_m (n, n_p, 2))
+        -> (n, n_p) log-likelihood or None``, added to the laser log-likelihood of the particles (feet midpoints)
+        of the *correlated* walking targets that have a detection. ``None`` (default): laser only.
+    split_scores : callable, optional
+        Fusion hook (seed 001 B17): ``f(t_ns, member_ids (m,), detection_centres_m (n_d, 2)) -> (n_d, m) scores
+        or None``; when it gives finite scores, a splitting merged target's members go to the detections by the
+        Hungarian algorithm on ``-score`` (appearance) instead of on their predicted positions (motion). The split
+        event's attributes say which decided (``"identity"``) and whether it differed from motion
+        (``"overrode_motion"``). ``None`` (default): motion only.
     **overrides
         Any :class:`TrackerParams` field, e.g. ``lateral_m=0.2``.
 
@@ -655,8 +665,14 @@ class LaserPeopleTracker:
                        "_born_edge")
 
     def __init__(self, params: TrackerParams | Mapping[str, Any] | None = None, *, area_m: Any = None,
-                 rng: np.random.Generator | int | None = None, **overrides: Any) -> None:
+                 rng: np.random.Generator | int | None = None,
+                 extra_log_likelihood: Callable[[int, np.ndarray, np.ndarray], np.ndarray | None] | None = None,
+                 split_scores: Callable[[int, tuple[int, ...], np.ndarray], np.ndarray | None] | None = None,
+                 **overrides: Any) -> None:
         self.params = p = _params(params, overrides)
+        # fusion hooks (seed 001 B16, B17), off by default: see the class docstring
+        self._extra_ll = extra_log_likelihood
+        self._split_scores = split_scores
         self.area_m = area_m
         self.rng = _rng(rng)
         self._next_id = itertools.count(1)
@@ -824,6 +840,13 @@ class LaserPeopleTracker:
             feet[upd], sd[upd], one[upd] = det.feet[j], det.inter_feet[j], det.one_foot[j]
             ll = laser_log_likelihood(self._x, feet, sd, one, p.sigma_f_m, p.sigma_w_m, sigma_f_one=p.sigma_f_one_m,
                                       kappa=p.kappa, lateral_m=p.lateral_m)
+            if self._extra_ll is not None:  # fusion hook (B16): the camera's score map for correlated targets
+                corr = np.flatnonzero(upd & (labels[:n_w] == _CORRELATED))
+                if corr.size:
+                    xc = self._x[corr]
+                    extra = self._extra_ll(t_ns, self._id[corr].copy(), 0.5 * (xc[..., 0:2] + xc[..., 2:4]))
+                    if extra is not None:
+                        ll[corr] = ll[corr] + np.asarray(extra, np.float64)
             self._w, _ = reweight(self._w, ll)
             self._seen[upd] = t_ns
             pos = self._walking_centres()
@@ -1038,6 +1061,14 @@ class LaserPeopleTracker:
         p = self.params
         cost = np.linalg.norm(m.pos[:, None, :] - det.centres[dets][None, :, :], axis=2)
         pairs, un_members, _ = hungarian(cost)
+        how: dict[str, Any] = {}  # the laser-only event is unchanged
+        if self._split_scores is not None:  # fusion hook (B17): the members' classifiers say who is who
+            how = {"identity": "motion"}
+            scores = self._split_scores(t_ns, tuple(m.ids), det.centres[dets].copy())
+            if scores is not None and np.isfinite(scores).all():
+                by_look, un_look, _ = hungarian(-np.asarray(scores, np.float64).T)
+                how = {"identity": "appearance", "overrode_motion": not np.array_equal(by_look, pairs)}
+                pairs, un_members = by_look, un_look
         to_det = np.full(len(m.info), -1, np.int64)
         to_det[pairs[:, 0]] = pairs[:, 1]
         for k in un_members:  # more members than detections: the rest stay together at their nearest
@@ -1063,7 +1094,7 @@ class LaserPeopleTracker:
                                           m.vel[ks].copy(), [m.info[k] for k in ks], multi_last=t_ns))
         ids = tuple(sorted(m.ids))  # held back for split_hold_s: a merge of the same people undoes it
         self._held_splits[frozenset(ids)] = Event(t_ns, p.sensor, "split", t_ns, position_m=m.x[0:2].copy(),
-                                                  track_ids=ids, attributes={"parts": tuple(sorted(parts))})
+                                                  track_ids=ids, attributes={"parts": tuple(sorted(parts)), **how})
 
     def _births(self, t_ns: int, det: DetectionArrays, free: np.ndarray, edge_d: np.ndarray) -> list[TrackState]:
         p = self.params

@@ -1,0 +1,219 @@
+"""Seed 001's comparison (ALGORITHMS.md B19): laser-only vs camera-only vs fusion (the tracking-learning loop).
+
+Simulated ``crowd`` and ``groups`` (with their camera), 3 seeds each, all runs in this process one after
+another (no parallel load on the timings):
+
+* laser-only: :func:`fusiontrack.tracking.tracker.track_recording` (walking-model PFs, identities at splits
+  by motion);
+* camera-only: :func:`fusiontrack.vision.people.track_camera` (foreground blobs, the calibrated camera's
+  floor positions);
+* fusion: :func:`fusiontrack.fusion.track_fused` (the same laser tracker + per-target classifiers: B15
+  learning, B16 score maps, B17 identities at splits).
+
+Columns: MOTA, IDF1, HOTA (floor, match 0.5 m), ID switches, merge/split events resolved correctly out of all
+true ones, and time per frame. A true split (:func:`fusiontrack.sim.situations.situation_events`, after the
+3 s in which the laser backgrounds are learnt) of agents that merged earlier, each followed by a track of its
+own before the merge (the others have no identity to keep), is *resolved correctly* when
+each agent is matched (nearest track within 0.5 m) 0.3 s before the merge and 1 s after the split, to the
+same track both times, and the agents' tracks differ. Time per frame = total processing time (laser
+detection + tracking, or image reading + camera tracking, or both as needed) divided by the recording's
+seconds x 25 (seed 001's 25 Hz integrated frames), so the three columns share one denominator.
+
+    .venv/bin/python benchmarks/fusion.py [--seeds 0 1 2] [--crowd-seconds 30] [--groups-seconds 30]
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from fusiontrack.eval import evaluate_floor
+from fusiontrack.fusion import track_fused
+from fusiontrack.io.recording import Recording
+from fusiontrack.sim.scenario import load_scenario
+from fusiontrack.sim.simulator import Simulation, simulate
+from fusiontrack.sim.situations import situation_events
+from fusiontrack.tracking.tracker import track_recording
+from fusiontrack.types import Event, GroundTruth, TrackState
+from fusiontrack.vision.people import track_camera
+
+WARMUP_S = 3.0
+SIM_PF = {"lateral_m": 0.2}  # the simulator's feet are 0.2 m apart side by side
+FRAME_HZ = 25.0
+BEFORE_S, AFTER_S, MATCH_M = 0.3, 1.0, 0.5
+
+
+def _index(states: Sequence[TrackState]) -> tuple[np.ndarray, list[list[TrackState]]]:
+    by_t: dict[int, list[TrackState]] = {}
+    for s in states:
+        by_t.setdefault(s.t_ns, []).append(s)
+    times = np.array(sorted(by_t), np.int64)
+    return times, [by_t[int(t)] for t in times]
+
+
+def _track_of(agent: int, t_ns: int, gt_t: np.ndarray, gt: Sequence[GroundTruth], st_t: np.ndarray,
+              st: list[list[TrackState]]) -> int | None:
+    """The track nearest (within MATCH_M) to the agent's true position at about ``t_ns``."""
+    if not len(gt_t) or not len(st_t):
+        return None
+    g = gt[int(np.clip(np.searchsorted(gt_t, t_ns), 0, len(gt_t) - 1))]
+    hit = np.flatnonzero(g.ids == agent)
+    if not hit.size:
+        return None
+    xy = g.positions_m[hit[0]]
+    k = int(np.clip(np.searchsorted(st_t, g.t_ns), 0, len(st_t) - 1))
+    if k > 0 and abs(st_t[k - 1] - g.t_ns) < abs(st_t[k] - g.t_ns):
+        k -= 1
+    best, best_d = None, MATCH_M
+    for s in st[k]:
+        d = float(np.hypot(*(s.position_m - xy)))
+        if d <= best_d and np.isfinite(d):
+            best, best_d = s.track_id, d
+    return best
+
+
+def splits_resolved(gt: Sequence[GroundTruth], truth_events: Sequence[Event], states: Sequence[TrackState],
+                    t_from_ns: int) -> tuple[int, int]:
+    """(correctly resolved, all) true split events after ``t_from_ns`` of agents that merged before, each
+    tracked on its own (by a distinct track) before the merge."""
+    gt_t = np.array([g.t_ns for g in gt], np.int64)
+    st_t, st = _index(states)
+    merges = sorted((e for e in truth_events if e.kind == "merge"), key=lambda e: e.t_ns)
+    right = total = 0
+    for e in truth_events:
+        if e.kind != "split" or e.t_ns < t_from_ns:
+            continue
+        agents = set(e.track_ids)
+        before = [m for m in merges if m.t_ns < e.t_ns and agents <= set(m.track_ids)]
+        if not before or before[-1].t_ns - BEFORE_S * 1e9 < t_from_ns:
+            continue
+        t0 = before[-1].t_ns - round(BEFORE_S * 1e9)
+        t1 = e.t_ns + round(AFTER_S * 1e9)
+        pre = [_track_of(a, t0, gt_t, gt, st_t, st) for a in sorted(agents)]
+        if None in pre or len(set(pre)) < len(pre):
+            continue  # no identities to keep: an agent was not tracked on its own before the merge
+        total += 1
+        post = [_track_of(a, t1, gt_t, gt, st_t, st) for a in sorted(agents)]
+        ok = all(a is not None and a == b for a, b in zip(pre, post, strict=True)) and len(set(post)) == len(post)
+        right += ok
+    return right, total
+
+
+def run_sim(name: str, seconds: float, seed: int, tmp: Path) -> dict[str, Any]:
+    scenario = load_scenario(name).with_overrides(seconds=seconds, seed=seed)
+    path = tmp / f"{name}_{seed}_{int(seconds)}"
+    sim = simulate(scenario, path)
+    bounds = Simulation(scenario).world.bounds_m
+    corrections = {c.name: -round(c.clock_offset_ms * 1e6) for c in scenario.config.lasers}
+    with Recording(path) as rec:
+        gt = list(rec.messages(["/ground_truth"]))
+    t_warm = gt[0].t_ns + round(WARMUP_S * 1e9)
+    truth_events = situation_events(gt, bounds)
+    n_frames = seconds * FRAME_HZ
+    out: dict[str, Any] = {"mean_present": sim.mean_present}
+
+    def score(states: list[TrackState], seconds_spent: float) -> dict[str, Any]:
+        m = evaluate_floor(gt, states, 0.5)
+        return {"m": m, "splits": splits_resolved(gt, truth_events, states, t_warm),
+                "ms_per_frame": 1e3 * seconds_spent / n_frames}
+
+    t0 = time.perf_counter()
+    states, _ = track_recording(path, params=SIM_PF, area_m=bounds, clock_corrections_ns=corrections)
+    out["laser"] = score(states, time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    states, _, _ = track_camera(path)
+    out["camera"] = score(states, time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    states, _, stats = track_fused(path, tracker_params=SIM_PF, area_m=bounds, clock_corrections_ns=corrections)
+    out["fusion"] = score(states, time.perf_counter() - t0)
+    out["stats"] = stats
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--crowd-seconds", type=float, default=30.0)
+    parser.add_argument("--groups-seconds", type=float, default=30.0)
+    args = parser.parse_args()
+    console = Console(width=200)
+    t_start = time.perf_counter()
+    systems = (("laser", "laser-only"), ("camera", "camera-only"), ("fusion", "fusion"))
+    with tempfile.TemporaryDirectory() as tmp_name:
+        tmp = Path(tmp_name)
+        results = {(name, seed): run_sim(name, secs, seed, tmp)
+                   for name, secs in (("crowd", args.crowd_seconds), ("groups", args.groups_seconds))
+                   for seed in args.seeds}
+    table = Table(title=f"seed 001: laser-only vs camera-only vs fusion (crowd {args.crowd_seconds:g} s, groups "
+                        f"{args.groups_seconds:g} s; match 0.5 m; ms per 25 Hz frame)", header_style="bold")
+    for col in ("scenario", "seed", "people", "system", "MOTA", "IDF1", "HOTA", "IDSW", "splits resolved",
+                "ms / frame"):
+        table.add_column(col, justify="left" if col in ("scenario", "system") else "right")
+    summary: dict[tuple[str, str], dict[str, float]] = {}
+    for name in ("crowd", "groups"):
+        rows = [(seed, r) for (n, seed), r in results.items() if n == name]
+        for seed, r in rows:
+            for key, label in systems:
+                m, (ok, n) = r[key]["m"], r[key]["splits"]
+                table.add_row(name, str(seed), f"{r['mean_present']:.1f}", label, f"{m.mota:.3f}", f"{m.idf1:.3f}",
+                              f"{m.hota:.3f}", str(m.id_switches), f"{ok}/{n}", f"{r[key]['ms_per_frame']:.2f}")
+        for key, label in systems:
+            rs = [r[key] for _, r in rows]
+            ok, n = sum(x["splits"][0] for x in rs), sum(x["splits"][1] for x in rs)
+            s = summary[(name, key)] = {
+                "mota": float(np.mean([x["m"].mota for x in rs])), "idf1": float(np.mean([x["m"].idf1 for x in rs])),
+                "hota": float(np.mean([x["m"].hota for x in rs])), "idsw": sum(x["m"].id_switches for x in rs),
+                "ok": ok, "n": n, "ms": float(np.mean([x["ms_per_frame"] for x in rs]))}
+            table.add_row(name, "all", "", label, f"{s['mota']:.3f}", f"{s['idf1']:.3f}", f"{s['hota']:.3f}",
+                          str(s["idsw"]), f"{ok}/{n} ({100 * ok / max(n, 1):.0f} %)", f"{s['ms']:.2f}", style="bold")
+    console.print(table)
+
+    use = Table(title="fusion: what the camera was used for (summed over seeds)", header_style="bold")
+    for col in ("scenario", "laser steps", "images read", "training frames", "score maps", "splits",
+                "by appearance", "appearance overrode motion"):
+        use.add_column(col, justify="left" if col == "scenario" else "right")
+    for name in ("crowd", "groups"):
+        st = [r["stats"] for (n, _), r in results.items() if n == name]
+        use.add_row(name, *(str(sum(getattr(s, f) for s in st)) for f in (
+            "steps", "frames_used", "train_frames", "score_maps", "splits", "splits_by_appearance", "overrides")))
+    console.print(use)
+
+    targets = Table(title="B19 targets (all scenarios and seeds)", header_style="bold")
+    for col in ("target", "value", "met"):
+        targets.add_column(col)
+    lz = {k: sum(summary[(n, k)]["ok"] for n in ("crowd", "groups")) for k in ("laser", "fusion")}
+    nz = {k: sum(summary[(n, k)]["n"] for n in ("crowd", "groups")) for k in ("laser", "fusion")}
+    share = {k: lz[k] / max(nz[k], 1) for k in lz}
+    idsw = {k: sum(summary[(n, k)]["idsw"] for n in ("crowd", "groups")) for k in ("laser", "fusion")}
+    idf1 = {k: float(np.mean([summary[(n, k)]["idf1"] for n in ("crowd", "groups")])) for k in ("laser", "fusion")}
+    ms = {k: float(np.mean([summary[(n, k)]["ms"] for n in ("crowd", "groups")])) for k in ("laser", "camera",
+                                                                                              "fusion")}
+    checks = [
+        ("fusion resolves >= 90 % of merge/split events",
+         f"{lz['fusion']}/{nz['fusion']} = {100 * share['fusion']:.0f} % (laser-only {100 * share['laser']:.0f} %)",
+         share["fusion"] >= 0.9),
+        ("fusion ID switches <= half of laser-only's", f"{idsw['fusion']} vs {idsw['laser']}",
+         idsw["fusion"] <= 0.5 * idsw["laser"]),
+        ("fusion IDF1 >= laser-only + 0.10 (or >= 0.95)", f"{idf1['fusion']:.3f} vs {idf1['laser']:.3f}",
+         idf1["fusion"] >= min(idf1["laser"] + 0.10, 0.95)),
+        ("fusion time per frame <= 1.5x laser-only", f"{ms['fusion']:.2f} vs {ms['laser']:.2f} ms "
+         f"({ms['fusion'] / ms['laser']:.2f}x)", ms["fusion"] <= 1.5 * ms["laser"]),
+        ("fusion time per frame <= 0.3x camera-only", f"{ms['fusion']:.2f} vs {ms['camera']:.2f} ms "
+         f"({ms['fusion'] / ms['camera']:.2f}x)", ms["fusion"] <= 0.3 * ms["camera"]),
+    ]
+    for label, value, met in checks:
+        targets.add_row(label, value, "met" if met else "NOT met")
+    console.print(targets)
+    console.print(f"total {time.perf_counter() - t_start:.0f} s")
+
+
+if __name__ == "__main__":
+    main()

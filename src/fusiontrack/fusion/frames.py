@@ -1,0 +1,113 @@
+"""A recording's camera images, read lazily: an image is converted only when the tracker asks for it.
+
+Seed 001's fused system is fast because "only a limited number of targets required visual processing": the
+camera is read for the targets that need it (training, score maps, splits). :class:`LazyFrames` follows the
+laser clock through the image topic, keeping the raw bytes of the latest image only, and converts (deserialises
+to a :class:`~fusiontrack.types.Image`) the image nearest to a time on request, once.
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+from collections.abc import Iterator
+from typing import Any
+
+from ..errors import RecordingError
+from ..io.ros import FROM_ROS
+from ..types import Image
+
+__all__ = ["LazyFrames"]
+
+log = logging.getLogger(__name__)
+
+
+class LazyFrames:
+    """The images of one topic of an open :class:`~fusiontrack.io.recording.Recording`, converted on demand.
+
+    Parameters
+    ----------
+    rec : Recording
+        Open recording (the caller closes it).
+    topic : str
+        ``sensor_msgs/Image`` or ``CompressedImage`` topic.
+    max_dt_ns : int
+        :meth:`at` gives an image only if its log time is this close to the time asked for.
+    clock_correction_ns : int
+        Added to the image times (the camera client's clock offset, as for the scans).
+
+    Notes
+    -----
+    Times must be asked for in increasing order (the stream is read once, forwards). An image's time is its
+    capture stamp (header, read from the raw bytes without deserialising; the log time when it is 0) plus
+    ``clock_correction_ns``; a camera's latency (log time after capture) does not shift the selection.
+    """
+
+    def __init__(self, rec: Any, topic: str, max_dt_ns: int = 50_000_000, clock_correction_ns: int = 0) -> None:
+        conns = rec.select([topic], convertible_only=True)
+        if not conns:
+            raise RecordingError(f"{rec.paths[0]}: no image topic {topic!r}")
+        self.topic = topic
+        self.sensor = rec.sensor_of(topic)
+        self.max_dt_ns = int(max_dt_ns)
+        self.correction_ns = int(clock_correction_ns)
+        # Recording has no public "raw bytes, convert later" stream: its raw reader is used here so that images
+        # the tracker never needs are never deserialised (seed 001's "camera read only when needed").
+        owners = {id(c): r for r in rec._readers for c in r.connections}
+        self._deser = {id(c): owners[id(c)] for c in conns}
+        self._it: Iterator[tuple[Any, int, bytes]] = (
+            (conn, self._stamp(data, t_log) + self.correction_ns, data) for conn, t_log, data in rec._raw(conns))
+        self._prev: tuple[Any, int, bytes] | None = None
+        self._next: tuple[Any, int, bytes] | None = next(self._it, None)
+        self._cache: tuple[int, Image | None] | None = None  # (log time, converted image)
+        self.converted = 0  # images converted so far
+        self.seen = 0  # images passed so far
+
+    @staticmethod
+    def _stamp(data: bytes, t_log: int) -> int:
+        """The header stamp of a raw image message: ``sec`` and ``nanosec`` are at bytes 4-12 both in ROS 2 CDR
+        (after the 4-byte encapsulation header, byte 1 = 1 for little-endian) and in ROS 1 (after ``seq``)."""
+        if len(data) < 12:
+            return t_log
+        order = ">" if data[0] == 0 and data[1] == 0 else "<"  # CDR big-endian; ROS 1 and CDR_LE little
+        sec, nsec = struct.unpack_from(order + "iI", data, 4)
+        t = sec * 1_000_000_000 + nsec
+        return t if sec > 0 and nsec < 1_000_000_000 else t_log
+
+    def _advance(self, t_ns: int) -> None:
+        while self._next is not None and self._next[1] <= t_ns:
+            self._prev, self._next = self._next, next(self._it, None)
+            self.seen += 1
+
+    def nearest_time(self, t_ns: int) -> int | None:
+        """Time of the image nearest to ``t_ns`` within ``max_dt_ns`` (no conversion), or None."""
+        self._advance(t_ns)
+        best = None
+        for cand in (self._prev, self._next):
+            if cand is not None and abs(cand[1] - t_ns) <= self.max_dt_ns and (
+                    best is None or abs(cand[1] - t_ns) < abs(best[1] - t_ns)):
+                best = cand
+        return None if best is None else int(best[1])
+
+    def at(self, t_ns: int) -> Image | None:
+        """The image nearest to ``t_ns`` (converted once and cached), or None if none is within ``max_dt_ns``."""
+        t_log = self.nearest_time(t_ns)
+        if t_log is None:
+            return None
+        if self._cache is not None and self._cache[0] == t_log:
+            return self._cache[1]
+        raw = self._prev if self._prev is not None and self._prev[1] == t_log else self._next
+        assert raw is not None
+        conn, _, data = raw
+        img: Image | None = None
+        try:
+            msg = self._deser[id(conn)].deserialize(data, conn.msgtype)
+            out = FROM_ROS[conn.msgtype](msg, t_log, self.sensor, conn.topic)
+            img = out if isinstance(out, Image) and out.encoding in ("bgr8", "rgb8") else None
+            if img is not None and img.encoding == "rgb8":
+                img = Image(img.t_ns, img.sensor, img.frame_id, img.pixels[..., ::-1], "bgr8")
+        except Exception as err:  # one bad image must not end the run: the laser goes on alone
+            log.warning("%s: image at %d ns unreadable (%s); skipped", self.topic, t_log, err)
+        self.converted += 1
+        self._cache = (t_log, img)
+        return img
