@@ -319,6 +319,9 @@ def simulate(
 PIPELINES = {
     "people-laser": "people tracked with 2D lasers (seed 001's laser side)",
     "people-camera": "people tracked in one camera's images: foreground blobs, or a MOTChallenge detection file",
+    # seed 001's fused pipeline (fusiontrack.fusion): needs LaserScan topics and one calibrated camera
+    "people": "people tracked with 2D lasers and a camera: per-target classifiers learnt online name the "
+              "people at splits (seed 001's tracking-learning loop)",
 }
 
 
@@ -346,8 +349,8 @@ def track(
                                                    "(0.625 for 768x576 boxes on a 480x360 video).")] = 1.0,
     min_score: Annotated[float | None, typer.Option(help="people-camera: drop detections with a lower "
                                                     "confidence.")] = None,
-    camera_topic: Annotated[str | None, typer.Option(help="people-camera: the recording's image topic (default: "
-                                                     "its only one).")] = None,
+    camera_topic: Annotated[str | None, typer.Option(help="people-camera, people: the recording's image topic "
+                                                     "(default: its only one).")] = None,
     max_frames: Annotated[int | None, typer.Option(help="people-camera: stop after this many frames.")] = None,
 ) -> None:
     """Track people in a recording; writes tracks.csv, tracks.jsonl (states + events) and tracks.mp4.
@@ -372,7 +375,8 @@ def track(
                       time_source=time_source, video=video)
         return
     camera_only = {"--detections": detections is not None, "--detection-scale": detection_scale != 1.0,
-                   "--min-score": min_score is not None, "--camera-topic": camera_topic is not None,
+                   "--min-score": min_score is not None,
+                   "--camera-topic": camera_topic is not None and pipeline != "people",  # people: its camera
                    "--max-frames": max_frames is not None}
     if any(camera_only.values()):
         given = ", ".join(k for k, v in camera_only.items() if v)
@@ -392,10 +396,22 @@ def track(
     timings: dict[str, list[float]] = {"detect_s": [], "track_s": []}
     with progress() as bar:
         task = bar.add_task(f"tracking ({tracker_kind})", total=1.0)
-        states, events = track_recording(
-            recordings, tracker=tracker_kind, params=cfg.tracking or None, topics=topics, time_source=time_source,
-            clock_corrections_ns=cfg.clock_corrections_ns(), detector_params=cfg.laser or None, rng=seed,
-            area_m=area_m, timings=timings, progress=lambda f: bar.update(task, completed=f))
+        if pipeline == "people":  # seed 001's fused pipeline (fusiontrack.fusion)
+            from .fusion import track_fused
+
+            if tracker_kind != "pf":
+                raise ConfigError(f"--tracker: the people pipeline uses the pf tracker, got {tracker_kind!r}")
+            states, events, _ = track_fused(
+                recordings, tracker_params=cfg.tracking or None, camera_topic=camera_topic, topics=topics,
+                time_source=time_source, clock_corrections_ns=cfg.clock_corrections_ns(),
+                detector_params=cfg.laser or None, rng=seed, area_m=area_m, timings=timings,
+                progress=lambda f: bar.update(task, completed=f))
+        else:
+            states, events = track_recording(
+                recordings, tracker=tracker_kind, params=cfg.tracking or None, topics=topics,
+                time_source=time_source, clock_corrections_ns=cfg.clock_corrections_ns(),
+                detector_params=cfg.laser or None, rng=seed, area_m=area_m, timings=timings,
+                progress=lambda f: bar.update(task, completed=f))
     output.mkdir(parents=True, exist_ok=True)
     write_tracks_csv(output / "tracks.csv", states)
     write_jsonl(output / "tracks.jsonl", [*states, *events])
@@ -558,6 +574,65 @@ def _bounds_of(recording: Path) -> Any:
 # --------------------------------------------------------------------------------------------------
 # train-classifier, pdr, fit-step-model
 # --------------------------------------------------------------------------------------------------
+
+
+@app.command()
+def calibrate(
+    camera: Annotated[str, typer.Argument(help="The camera's sensor name in the pipeline file.")],
+    config: Annotated[Path, typer.Option("--config", "-c", help="Pipeline file: the camera's pose is rewritten "
+                                         "there (only that line).")],
+    points: Annotated[Path | None, typer.Option(help="Control points CSV: x_m,y_m,z_m,u_px,v_px (PnP).")] = None,
+    reference: Annotated[str, typer.Option(help="Frame of the control points: world, or a sensor of the "
+                                           "pipeline (e.g. a laser).")] = "world",
+    recording: Annotated[Path | None, typer.Option(help="With --points: a recording whose CameraInfo gives the "
+                                                   "intrinsics.")] = None,
+    intrinsics: Annotated[str | None, typer.Option(help="With --points: fx,fy,cx,cy[,k1,k2,p1,p2[,k3]].")] = None,
+    ransac: Annotated[bool, typer.Option(help="With --points: RANSAC against mis-clicked points.")] = False,
+    adaptive: Annotated[Path | None, typer.Option(help="Instead of points: learn the camera's horizontal bias "
+                                                  "from the people seen by camera and lasers in a recording "
+                                                  "(seed 000).")] = None,
+    rho: Annotated[float, typer.Option(help="With --adaptive: learning rate of the bias (A10).")] = 0.1,
+    history: Annotated[Path | None, typer.Option(help="With --adaptive: write the bias history (CSV).")] = None,
+    dry_run: Annotated[bool, typer.Option(help="Report only; leave the pipeline file as it is.")] = False,
+) -> None:
+    """Calibrate a camera: from control points (PnP) or by seed 000's adaptive horizontal bias."""
+    import numpy as np
+
+    from .calibration import calibrate_from_points, calibrate_from_recording
+    from .calibration.bias import BiasParams
+    from .calibration.bias_run import write_bias_history
+
+    if (points is None) == (adaptive is None):
+        raise ConfigError("calibrate: give exactly one of --points CSV or --adaptive RECORDING")
+    if points is not None:
+        intr: Any = None
+        if intrinsics is not None:
+            try:
+                vals = [float(v) for v in intrinsics.split(",")]
+            except ValueError as err:
+                raise ConfigError(f"--intrinsics: expected numbers fx,fy,cx,cy[,...], got {intrinsics!r}") from err
+            if len(vals) not in (4, 8, 9):
+                raise ConfigError(f"--intrinsics: expected 4, 8 or 9 numbers, got {len(vals)}")
+            fx, fy, cx, cy = vals[:4]
+            intr = (np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), np.array(vals[4:]) if len(vals) > 4 else None)
+        report = calibrate_from_points(config, camera, points, reference=reference, intrinsics=intr,
+                                       recording=recording, ransac=ransac, write=not dry_run)
+        fit = report.pnp
+        console.print(f"PnP on {len(fit.residuals_px)} points: reprojection "
+                      f"rms {fit.rms_px:.2f} px, median {fit.median_px:.2f} px, max {fit.max_px:.2f} px")
+    else:
+        with console.status("learning the horizontal bias"):
+            report = calibrate_from_recording(config, camera, adaptive, params=BiasParams(rho=rho),
+                                              write=not dry_run)
+        run = report.bias
+        console.print(f"horizontal bias {np.degrees(run.bias_rad):+.3f} deg after {len(run.history)} updates")
+        if history is not None:
+            write_bias_history(history, run.history)
+            console.print(f"bias history: {history}")
+    before, after = report.previous, report.pose
+    console.print(f"{camera}: yaw {before.yaw_deg:.3f} -> {after.yaw_deg:.3f} deg, pitch {before.pitch_deg:.3f} -> "
+                  f"{after.pitch_deg:.3f} deg, position ({after.x:.3f}, {after.y:.3f}, {after.z:.3f}) m"
+                  + (f"; written to {report.written}" if report.written else " (dry run: not written)"))
 
 
 @app.command(name="train-classifier")
