@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-dev
 
-.PHONY: demo test lint bench bench-io bench-laser bench-camera bench-imu bench-baselines clean install
+.PHONY: demo test lint bench bench-io bench-laser bench-camera bench-fusion bench-imu bench-baselines clean install
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -28,7 +28,7 @@ demo: $(STAMP)
 
 # Benchmarks print tables; each group takes a few minutes on 2 cores. `make bench` runs them all but the
 # Stone Soup comparison, which needs an optional extra (`make bench-baselines` installs it).
-bench: bench-io bench-laser bench-camera bench-imu
+bench: bench-io bench-laser bench-camera bench-fusion bench-imu
 
 bench-io: $(STAMP)
 	$(BIN)/python benchmarks/read_throughput.py
@@ -41,9 +41,16 @@ bench-laser: $(STAMP)
 
 bench-camera: $(STAMP)
 	$(BIN)/python benchmarks/camera.py
+	$(BIN)/python benchmarks/camera_people.py
+	$(BIN)/python benchmarks/appearance.py
+
+bench-fusion: $(STAMP)
+	$(BIN)/python benchmarks/bias.py
+	$(BIN)/python benchmarks/fusion.py
 
 bench-imu: $(STAMP)
 	$(BIN)/python benchmarks/pdr_steps.py
+	$(BIN)/python benchmarks/rgbd_compressive.py
 
 bench-baselines: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[dev,stonesoup]"
