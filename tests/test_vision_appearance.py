@@ -595,3 +595,14 @@ def test_boxes_off_the_image_are_skipped_by_the_bank():
     scores = bank.box_scores(img, [[400, 10, 450, 60], [-38, 60, 2, 160], list(BOXES[1])])
     assert np.isnan(scores[:2]).all()  # the 2nd box is only 5 % visible
     assert np.isfinite(scores[2]).all()
+
+
+def test_background_negatives_for_every_box_whatever_the_id_order():
+    """Each training box gets its ``background_patches`` negatives, also when the ids are not in box order."""
+    from fusiontrack.vision.appearance import AppearanceBank, AppearanceParams
+
+    bank = AppearanceBank(AppearanceParams(background_patches=10), rng=0)
+    boxes = np.array([[100.0, 100.0, 140.0, 200.0], [400.0, 150.0, 440.0, 250.0]])
+    for rows in ([0, 1], [1, 0]):
+        _, owner = bank._background((480, 640, 3), boxes, rows)
+        assert np.bincount(owner, minlength=2).tolist() == [10, 10]

@@ -133,17 +133,12 @@ class FusionStats:
 
 def _components(points: np.ndarray, radius_m: float) -> np.ndarray:
     """Labels ``(n,)`` of the groups of ``points (n, 2)`` linked by distances below ``radius_m``."""
-    n = points.shape[0]
-    lab = np.arange(n)
-    if n < 2:
-        return lab
+    from scipy.sparse.csgraph import connected_components
+
+    if points.shape[0] < 2:
+        return np.arange(points.shape[0])
     close = np.linalg.norm(points[:, None] - points[None], axis=2) < radius_m
-    for _ in range(n):  # label propagation: the smallest index of each group
-        new = np.where(close, lab[None, :], n).min(axis=1)
-        if np.array_equal(new, lab):
-            break
-        lab = new
-    return lab
+    return connected_components(close, directed=False)[1]
 
 
 class FusionTracker:

@@ -26,6 +26,7 @@ from fusiontrack.types import Detection, ObjectClass, Situation, TrackState
 __all__ = ["TrackClassifier"]
 
 _SHARED = (Situation.MERGED, Situation.CORRELATED)
+_FORGET_NS = 5_000_000_000  # a track not reported for 5 s has ended
 
 
 class TrackClassifier:
@@ -64,14 +65,23 @@ class TrackClassifier:
         self._frame = -1
         self._votes: dict[int, deque[str]] = {}
         self._cls: dict[int, str] = {}
+        self._seen: dict[int, int] = {}  # track id -> last time it was reported
 
     def classes(self) -> dict[int, str]:
-        """The current class of every track seen so far."""
+        """The current class of every track reported in the last 5 s."""
         return dict(self._cls)
 
     def update(self, t_ns: int, states: Sequence[TrackState], detections: Sequence[Detection]) -> list[TrackState]:
         """Take one frame; return ``states`` with ``cls`` set."""
         live = [s for s in states if s.t_ns == t_ns]
+        for s in live:
+            self._seen[s.track_id] = t_ns
+        # Forget tracks not reported for a while (their windows hold point arrays): a long run stays bounded.
+        for tid in [tid for tid, seen in self._seen.items() if t_ns - seen > _FORGET_NS]:
+            del self._seen[tid]
+            self._rows.pop(tid, None)
+            self._votes.pop(tid, None)
+            self._cls.pop(tid, None)
         if live and detections:
             have = [d for d in detections if d.features.get("points_m") is not None and len(d.features["points_m"])]
             if have:

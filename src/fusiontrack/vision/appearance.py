@@ -984,8 +984,12 @@ class AppearanceBank:
         free = ~_inside(cand.centres_px, boxes).any(axis=1)
         cand_owner = np.asarray(rows)[ring_rows][cand.box_index]
         # the first ``background_patches`` free candidates of each box (candidates are grouped by box)
+        # rank of each free candidate within its box (box_index is grouped but not sorted by owner id)
         order = np.flatnonzero(free)
-        first = np.searchsorted(cand_owner[order], cand_owner[order], side="left")
+        group = cand.box_index[order]
+        order = order[np.argsort(group, kind="stable")]
+        group = cand.box_index[order]
+        first = np.searchsorted(group, group, side="left")
         rank = np.arange(len(order)) - first
         take = order[rank < p.background_patches]
         return cand.subset(take), cand_owner[take]
