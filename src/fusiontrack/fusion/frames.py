@@ -56,7 +56,8 @@ class LazyFrames:
         owners = {id(c): r for r in rec._readers for c in r.connections}
         self._deser = {id(c): owners[id(c)] for c in conns}
         self._it: Iterator[tuple[Any, int, bytes]] = (
-            (conn, self._stamp(data, t_log) + self.correction_ns, data) for conn, t_log, data in rec._raw(conns))
+            (conn, self._stamp(data, t_log, _is_ros1(conn)) + self.correction_ns, data)
+            for conn, t_log, data in rec._raw(conns))
         self._prev: tuple[Any, int, bytes] | None = None
         self._next: tuple[Any, int, bytes] | None = next(self._it, None)
         self._cache: tuple[int, Image | None] | None = None  # (log time, converted image)
@@ -64,12 +65,12 @@ class LazyFrames:
         self.seen = 0  # images passed so far
 
     @staticmethod
-    def _stamp(data: bytes, t_log: int) -> int:
+    def _stamp(data: bytes, t_log: int, ros1: bool) -> int:
         """The header stamp of a raw image message: ``sec`` and ``nanosec`` are at bytes 4-12 both in ROS 2 CDR
         (after the 4-byte encapsulation header, byte 1 = 1 for little-endian) and in ROS 1 (after ``seq``)."""
         if len(data) < 12:
             return t_log
-        order = ">" if data[0] == 0 and data[1] == 0 else "<"  # CDR big-endian; ROS 1 and CDR_LE little
+        order = "<" if ros1 or data[1] == 1 else ">"  # ROS 1 is little-endian; CDR says so in byte 1
         sec, nsec = struct.unpack_from(order + "iI", data, 4)
         t = sec * 1_000_000_000 + nsec
         return t if sec > 0 and nsec < 1_000_000_000 else t_log
@@ -111,3 +112,8 @@ class LazyFrames:
         self.converted += 1
         self._cache = (t_log, img)
         return img
+
+
+def _is_ros1(conn: Any) -> bool:
+    """Whether a rosbags connection comes from a ROS 1 bag (its messages have no CDR encapsulation header)."""
+    return type(getattr(conn, "ext", None)).__name__ == "ConnectionExtRosbag1"
