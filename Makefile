@@ -51,6 +51,7 @@ bench-fusion: $(STAMP)
 bench-imu: $(STAMP)
 	$(BIN)/python benchmarks/pdr_steps.py
 	$(BIN)/python benchmarks/rgbd_compressive.py
+	$(BIN)/python benchmarks/pdr.py
 
 bench-baselines: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[dev,stonesoup]"
