@@ -40,7 +40,7 @@ import numpy as np
 
 from ..errors import ConfigError, RecordingError
 from ..geometry import PinholeCamera
-from ..tracking.tracker import LaserPeopleTracker, TrackerParams, area_from_backgrounds
+from ..tracking.tracker import LaserPeopleTracker, TrackerParams, run_tracker
 from ..types import Detection, Event, Image, Situation, TrackState
 from ..vision.appearance import AppearanceBank, AppearanceParams
 
@@ -432,7 +432,6 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
     from ..io.recording import LASERSCAN, Recording
     from ..io.sync import synchronize
     from ..laser.detector import detector_for_recording
-    from ..tracking.classify import TrackClassifier
     from ..vision.people import camera_from_recording
     from .frames import LazyFrames
 
@@ -464,48 +463,8 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
             raise ConfigError(f"area_m: expected 'auto', None, a rectangle or a polygon, got {area_m!r}")
         trk = FusionTracker(camera, frames, p, tracker_params, area_m=None if auto_area else area_m, rng=rng,
                             camera_name=cam_sensor)
-        geometries: dict[str, tuple[float, float]] = {}
-        classifier = TrackClassifier() if classify else None
-        states: list[TrackState] = []
-        events: list[Event] = []
         stream = synchronize(rec.messages(lasers, time_source=time_source),
                              clock_corrections_ns={k: v for k, v in corrections.items() if k != cam_sensor})
-        pending_t: int | None = None
-        t_det = 0.0
-
-        def run_step(t: int, t_det: float) -> None:
-            nonlocal auto_area
-            t0 = time.perf_counter()
-            dets = detector.detect(t)
-            t1 = time.perf_counter()
-            if auto_area and dets:
-                polygon = area_from_backgrounds(detector, geometries, poses)
-                if polygon is not None:
-                    trk.area_m = polygon
-                    auto_area = False
-            t2 = time.perf_counter()
-            new = trk.step(t, dets)
-            states.extend(classifier.update(t, new, dets) if classifier is not None else new)
-            t3 = time.perf_counter()
-            events.extend(trk.events)
-            if timings is not None:
-                timings.setdefault("detect_s", []).append(t_det + (t1 - t0))
-                timings.setdefault("track_s", []).append(t3 - t2)
-
-        for done, scan in enumerate(stream, start=1):
-            if pending_t is not None and scan.t_ns != pending_t:
-                run_step(pending_t, t_det)
-                t_det = 0.0
-            t0 = time.perf_counter()
-            detector.update(scan)
-            t_det += time.perf_counter() - t0
-            geometries[scan.sensor] = (scan.angle_min_rad, scan.angle_increment_rad)
-            pending_t = scan.t_ns
-            if progress is not None and done % 100 == 0:
-                progress(min(done / max(total, 1), 1.0))
-        if pending_t is not None:
-            run_step(pending_t, t_det)
-        events.extend(trk.finish())
-        if progress is not None:
-            progress(1.0)
+        states, events = run_tracker(trk, detector, poses, stream, total=total, auto_area=auto_area,
+                                     classify=classify, progress=progress, timings=timings)
     return states, events, trk.stats

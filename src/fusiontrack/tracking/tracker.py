@@ -1308,6 +1308,65 @@ def area_from_backgrounds(detector: Any, geometries: Mapping[str, tuple[float, f
 
 
 
+def run_tracker(trk: Any, detector: Any, poses: Mapping[str, np.ndarray], stream: Iterable[Any], *, total: int,
+                auto_area: bool = False, classify: bool = True, progress: Callable[[float], None] | None = None,
+                timings: dict[str, list[float]] | None = None) -> tuple[list[TrackState], list[Event]]:
+    """Step a tracker through a time-ordered stream of laser scans (the loop of :func:`track_recording`).
+
+    Each scan updates ``detector``; when the next scan has another time stamp, the detections at the pending
+    time go to ``trk.step`` (any tracker with ``step(t_ns, detections)``, ``events`` and ``finish()``), and the
+    states through a :class:`~fusiontrack.tracking.classify.TrackClassifier` when ``classify``. With
+    ``auto_area`` the covered area is read off the learnt backgrounds (:func:`area_from_backgrounds`) once
+    there are detections. ``total`` (scans) scales ``progress``; ``timings`` as in :func:`track_recording`.
+    """
+    from .classify import TrackClassifier
+
+
+    geometries: dict[str, tuple[float, float]] = {}
+    classifier = TrackClassifier() if classify else None
+    states: list[TrackState] = []
+    events: list[Event] = []
+    pending_t: int | None = None
+    t_det = 0.0
+
+    def run_step(t: int, t_det: float) -> None:
+        nonlocal auto_area
+        t0 = time.perf_counter()
+        dets = detector.detect(t)
+        t1 = time.perf_counter()
+        if auto_area and dets:
+            polygon = area_from_backgrounds(detector, geometries, poses)
+            if polygon is not None:
+                trk.area_m = polygon
+                auto_area = False
+        t2 = time.perf_counter()
+        new = trk.step(t, dets)
+        states.extend(classifier.update(t, new, dets) if classifier is not None else new)
+        t3 = time.perf_counter()
+        events.extend(trk.events)
+        if timings is not None:
+            timings.setdefault("detect_s", []).append(t_det + (t1 - t0))
+            timings.setdefault("track_s", []).append(t3 - t2)
+
+    for done, scan in enumerate(stream, start=1):
+        if pending_t is not None and scan.t_ns != pending_t:
+            run_step(pending_t, t_det)
+            t_det = 0.0
+        t0 = time.perf_counter()
+        detector.update(scan)
+        t_det += time.perf_counter() - t0
+        geometries[scan.sensor] = (scan.angle_min_rad, scan.angle_increment_rad)
+        pending_t = scan.t_ns
+        if progress is not None and done % 100 == 0:
+            progress(min(done / max(total, 1), 1.0))
+    if pending_t is not None:
+        run_step(pending_t, t_det)
+    events.extend(trk.finish())
+    if progress is not None:
+        progress(1.0)
+    return states, events
+
+
 def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "pf",
                     params: TrackerParams | Mapping[str, Any] | None = None,
                     progress: Callable[[float], None] | None = None, topics: Iterable[str] | None = None,
@@ -1364,7 +1423,6 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
     from ..io.sync import synchronize
     from ..laser.detector import detector_for_recording
     from .baseline import CVKalmanTracker
-    from .classify import TrackClassifier
 
     if tracker not in ("pf", "kalman"):
         raise ConfigError(f"tracker: expected 'pf' or 'kalman', got {tracker!r}")
@@ -1384,49 +1442,8 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
         auto_area = isinstance(area_m, str)
         if auto_area and area_m != "auto":
             raise ConfigError(f"area_m: expected 'auto', None, a rectangle or a polygon, got {area_m!r}")
-        geometries: dict[str, tuple[float, float]] = {}
-        classifier = TrackClassifier() if classify else None
-        states: list[TrackState] = []
-        events: list[Event] = []
         stream = synchronize(rec.messages(lasers, time_source=time_source),
                              clock_corrections_ns=clock_corrections_ns)
-        pending_t: int | None = None
-        t_det = 0.0
-
-        def run_step(t: int, t_det: float) -> None:
-            nonlocal auto_area
-            t0 = time.perf_counter()
-            dets = detector.detect(t)
-            t1 = time.perf_counter()
-            if auto_area and dets:
-                polygon = area_from_backgrounds(detector, geometries, poses)
-                if polygon is not None:
-                    trk.area_m = polygon
-                    auto_area = False
-            t2 = time.perf_counter()
-            new = trk.step(t, dets)
-            states.extend(classifier.update(t, new, dets) if classifier is not None else new)
-            t3 = time.perf_counter()
-            events.extend(trk.events)
-            if timings is not None:
-                timings.setdefault("detect_s", []).append(t_det + (t1 - t0))
-                timings.setdefault("track_s", []).append(t3 - t2)
-
-        for done, scan in enumerate(stream, start=1):
-            if pending_t is not None and scan.t_ns != pending_t:
-                run_step(pending_t, t_det)
-                t_det = 0.0
-            t0 = time.perf_counter()
-            detector.update(scan)
-            t_det += time.perf_counter() - t0
-            geometries[scan.sensor] = (scan.angle_min_rad, scan.angle_increment_rad)
-            pending_t = scan.t_ns
-            if progress is not None and done % 100 == 0:
-                progress(min(done / max(total, 1), 1.0))
-        if pending_t is not None:
-            run_step(pending_t, t_det)
-        if isinstance(trk, LaserPeopleTracker):
-            events.extend(trk.finish())
-        if progress is not None:
-            progress(1.0)
+        states, events = run_tracker(trk, detector, poses, stream, total=total, auto_area=auto_area,
+                                     classify=classify, progress=progress, timings=timings)
     return states, events
