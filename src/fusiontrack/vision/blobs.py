@@ -211,13 +211,28 @@ def blob_histograms(frame_bgr: np.ndarray, blobs: Blobs, bins: tuple[int, int, i
     if frame_bgr.ndim != 3 or frame_bgr.shape[:2] != blobs.label_image.shape or frame_bgr.dtype != np.uint8:
         raise ValueError(f"frame_bgr: expected an (H, W, 3) uint8 image of size {blobs.label_image.shape}, got "
                          f"{frame_bgr.shape} {frame_bgr.dtype}")
+    rois = [(blobs.label_image[v0:v1, u0:u1] == blobs.component_ids[k]).view(np.uint8)
+            for k, (u0, v0, u1, v1) in enumerate(blobs.boxes_px.astype(int))]
+    return box_histograms(frame_bgr, blobs.boxes_px, bins, masks=rois)
+
+
+def box_histograms(frame_bgr: np.ndarray, boxes_px: np.ndarray, bins: tuple[int, int, int] = (8, 8, 4),
+                   masks: list[np.ndarray] | None = None) -> np.ndarray:
+    """Normalised HSV histograms (A4's bins) of image boxes ``(n, 4)`` clipped to the image, ``(n, prod(bins))``.
+
+    ``masks`` (optional): per box, a uint8 mask of the box's size selecting the pixels counted. A box smaller
+    than 2 px a side, or with no pixel counted, gets the uniform histogram.
+    """
+    h, w = frame_bgr.shape[:2]
     n_bins = int(np.prod(bins))
-    out = np.full((len(blobs), n_bins), 1.0 / n_bins)
-    for k in range(len(blobs)):
-        u0, v0, u1, v1 = (int(c) for c in blobs.boxes_px[k])
+    out = np.full((len(boxes_px), n_bins), 1.0 / n_bins)
+    boxes = np.clip(np.round(np.asarray(boxes_px, dtype=np.float64)), 0, [w, h, w, h]).astype(int)
+    for k, (u0, v0, u1, v1) in enumerate(boxes.reshape(-1, 4)):
+        if u1 - u0 < 2 or v1 - v0 < 2:
+            continue
         hsv = cv2.cvtColor(np.ascontiguousarray(frame_bgr[v0:v1, u0:u1]), cv2.COLOR_BGR2HSV)
-        roi = (blobs.label_image[v0:v1, u0:u1] == blobs.component_ids[k]).view(np.uint8)
-        hist = cv2.calcHist([hsv], [0, 1, 2], roi, list(bins), [0, 180, 0, 256, 0, 256]).reshape(-1)
+        mask = None if masks is None else masks[k]
+        hist = cv2.calcHist([hsv], [0, 1, 2], mask, list(bins), [0, 180, 0, 256, 0, 256]).reshape(-1)
         total = float(hist.sum())
         if total > 0:
             out[k] = hist / total

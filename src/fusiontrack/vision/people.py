@@ -55,7 +55,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
 from ..errors import ConfigError, RecordingError
@@ -64,7 +63,7 @@ from ..io.tracks import MotBoxes, read_mot
 from ..tracking import kalman
 from ..tracking.association import hungarian
 from ..types import CameraInfo, Detection, Event, GroundTruth, Image, Situation, TrackState
-from .blobs import BlobParams, Blobs, blob_contours, blob_histograms, extract_blobs
+from .blobs import BlobParams, Blobs, blob_contours, blob_histograms, box_histograms, extract_blobs
 from .foreground import ForegroundModel, ForegroundParams, ForegroundResult
 
 __all__ = [
@@ -264,7 +263,7 @@ def mot_detections(det: MotBoxes, frame: int, t_ns: int, sensor: str, *, min_sco
     rows = det.rows_at(frame)
     rows = rows[det.conf[rows] >= min_score]
     boxes = det.boxes_xyxy[rows]
-    hists = _box_histograms(frame_bgr, boxes) if frame_bgr is not None and len(rows) else None
+    hists = box_histograms(frame_bgr, boxes) if frame_bgr is not None and len(rows) else None
     floor = floor_positions(camera, boxes)
     out = []
     for k, r in enumerate(rows):
@@ -272,22 +271,6 @@ def mot_detections(det: MotBoxes, frame: int, t_ns: int, sensor: str, *, min_sco
         pos = floor[k] if np.all(np.isfinite(floor[k])) else None
         out.append(Detection(t_ns, sensor, position_m=pos, box_px=boxes[k], score=float(det.conf[r]), cls="person",
                              features=feats))
-    return out
-
-
-def _box_histograms(frame_bgr: np.ndarray, boxes: np.ndarray, bins: tuple[int, int, int] = (8, 8, 4)
-                    ) -> np.ndarray:
-    """HSV histograms (A4's 8×8×4 bins) of whole boxes, clipped to the image: ``(n, 256)``, rows sum to 1."""
-    h, w = frame_bgr.shape[:2]
-    n_bins = int(np.prod(bins))
-    out = np.full((len(boxes), n_bins), 1.0 / n_bins)
-    for k, (u0, v0, u1, v1) in enumerate(np.clip(np.round(boxes), 0, [w, h, w, h]).astype(int)):
-        if u1 - u0 < 2 or v1 - v0 < 2:
-            continue
-        hsv = cv2.cvtColor(np.ascontiguousarray(frame_bgr[v0:v1, u0:u1]), cv2.COLOR_BGR2HSV)
-        hist = cv2.calcHist([hsv], [0, 1, 2], None, list(bins), [0, 180, 0, 256, 0, 256]).reshape(-1)
-        if hist.sum() > 0:
-            out[k] = hist / hist.sum()
     return out
 
 
