@@ -322,6 +322,9 @@ PIPELINES = {
     # seed 001's fused pipeline (fusiontrack.fusion): needs LaserScan topics and one calibrated camera
     "people": "people tracked with 2D lasers and a camera: per-target classifiers learnt online name the "
               "people at splits (seed 001's tracking-learning loop)",
+    # seed 003 (fusiontrack.fusion.traffic): lasers and cameras on a road, vehicle models, incidents
+    "traffic": "vehicles on a road from lasers and cameras: fused object models, mode particle filter, incidents "
+               "(stopped vehicle, road leaving, jam, wrong way)",
 }
 
 
@@ -352,6 +355,13 @@ def track(
     camera_topic: Annotated[str | None, typer.Option(help="people-camera, people: the recording's image topic "
                                                      "(default: its only one).")] = None,
     max_frames: Annotated[int | None, typer.Option(help="people-camera: stop after this many frames.")] = None,
+    geometry: Annotated[Path | None, typer.Option(help="traffic: road geometry TOML (roads, lanes, zones); default "
+                                                  "the simulator's ground_truth/world.json beside the recording."
+                                                  )] = None,
+    rules: Annotated[Path | None, typer.Option(help="traffic: incident rules TOML (default: the shipped D8 rules)."
+                                               )] = None,
+    compare: Annotated[bool, typer.Option(help="traffic: also run camera-only, laser-only and fusion without the "
+                                          "particle filter, and score them all when there is ground truth.")] = False,
 ) -> None:
     """Track people in a recording; writes tracks.csv, tracks.jsonl (states + events) and tracks.mp4.
 
@@ -366,6 +376,14 @@ def track(
         raise ConfigError(f"--pipeline: expected one of {', '.join(PIPELINES)}, got {pipeline!r}")
     if time_source not in ("header", "log"):
         raise ConfigError(f"--time: expected 'header' or 'log', got {time_source!r}")
+    traffic_only = {"--geometry": geometry is not None, "--rules": rules is not None, "--compare": compare}
+    if pipeline != "traffic" and any(traffic_only.values()):
+        given = ", ".join(k for k, v in traffic_only.items() if v)
+        raise ConfigError(f"{given}: only for --pipeline traffic (got --pipeline {pipeline})")
+    if pipeline == "traffic":
+        _track_traffic(recordings, output, config=config, geometry=geometry, rules=rules, compare=compare,
+                       video=video, time_source=time_source)
+        return
     if pipeline == "people-camera":
         if config is not None:
             raise ConfigError("--config: the people-camera pipeline takes no pipeline file yet (its camera comes "
@@ -430,6 +448,88 @@ def track(
 
         drawn = render_preview(recordings, output / "tracks.mp4", tracks=states)
         console.print(f"video: {output / 'tracks.mp4'} ({drawn.frames} frames)")
+
+
+def _track_traffic(sources: list[Path], output: Path, *, config: Path | None, geometry: Path | None,
+                   rules: Path | None, compare: bool, video: bool, time_source: str) -> None:
+    """``track --pipeline traffic``: seed 003's pipeline; writes tracks, events, summary and report.html."""
+    from .fusion.traffic import TrafficParams
+    from .fusion.traffic_run import run_traffic
+
+    if len(sources) != 1:
+        raise ConfigError(f"traffic: one recording at a time (got {len(sources)})")
+    cfg = _load_config(config)
+    params = TrafficParams.from_mapping(cfg.traffic, f"{config}: [traffic]") if cfg.traffic else TrafficParams()
+    with progress() as bar:
+        task = bar.add_task("tracking (traffic)", total=1.0)
+        summary = run_traffic(sources[0], output, geometry=geometry, rules=rules, params=params, compare=compare,
+                              video=video, time_source=time_source, progress=lambda f: bar.update(task, completed=f))
+    console.print(f"{summary['tracks']} tracks over {summary['duration_s']:.1f} s at {summary['x_real_time']:.1f}x "
+                  f"real time; events {summary['events'] or 'none'} -> {output}")
+    if "metrics" in summary:
+        table = Table(title="vehicles against ground truth (match within 2 m)")
+        for col in ("variant", "MOTA", "IDF1", "HOTA", "IDSW", "FP", "FN"):
+            table.add_column(col, justify="left" if col == "variant" else "right")
+        for v, m in summary["metrics"].items():
+            table.add_row(v, *(f"{m[k]:.3f}" if isinstance(m[k], float) else str(m[k])
+                               for k in ("MOTA", "IDF1", "HOTA", "IDSW", "FP", "FN")))
+        console.print(table)
+    if "incidents" in summary:
+        table = Table(title="incidents against the simulator's labels")
+        for col in ("kind", "true", "detections", "hits", "false alarms", "onset latency s", "alarm latency s"):
+            table.add_column(col, justify="left" if col == "kind" else "right")
+        for k, v in summary["incidents"].items():
+            table.add_row(k, str(v["true"]), str(v["detections"]), str(v["hits"]), str(v["false_alarms"]),
+                          *("–" if v[x] is None else f"{v[x]:.2f}" for x in ("onset_latency_s", "alarm_latency_s")))
+        console.print(table)
+    console.print(f"report: {output / 'report.html'}")
+
+
+@app.command()
+def events(
+    tracks: Annotated[Path, typer.Argument(help="tracks.csv / tracks.jsonl (or the folder of `fusiontrack track`).")],
+    geometry: Annotated[Path | None, typer.Option(help="Road geometry TOML (roads, lanes, zones).")] = None,
+    world: Annotated[Path | None, typer.Option(help="Or the simulator's world.json (or its run folder).")] = None,
+    rules: Annotated[Path | None, typer.Option(help="Incident rules TOML (default: the shipped D8 rules).")] = None,
+    learned: Annotated[bool, typer.Option(help="Use the learned behaviour model instead of the rules.")] = False,
+    truth: Annotated[Path | None, typer.Option(help="A simulated run folder: score the events against its "
+                                               "incidents.")] = None,
+    output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the events here (JSONL).")] = None,
+) -> None:
+    """Re-run scene understanding (seed 003 D7/D8) on saved tracks: incidents as JSONL, scored if --truth."""
+    from .io.tracks import write_jsonl
+    from .scene import detect_events, detect_events_learned, load_road_geometry, load_rules, road_geometry_from_world
+
+    if (geometry is None) == (world is None):
+        raise ConfigError("events: give the road as --geometry FILE.toml or --world world.json (exactly one)")
+    if geometry is not None:
+        geo = load_road_geometry(geometry)
+    else:
+        w = world / "ground_truth" / "world.json" if world.is_dir() else world
+        if not w.is_file():
+            raise ConfigError(f"--world {world}: no such file (expected the simulator's world.json)")
+        geo = road_geometry_from_world(w)
+    states, _ = _read_tracks(tracks)
+    if not states:
+        raise ConfigError(f"{tracks}: no track states")
+    if learned:
+        if rules is not None:
+            raise ConfigError("--rules: the learned model takes no rules file")
+        found = detect_events_learned(states, geo)
+    else:
+        found = detect_events(states, geo, load_rules(rules) if rules is not None else None)
+    kinds: dict[str, int] = {}
+    for e in found:
+        kinds[e.kind] = kinds.get(e.kind, 0) + 1
+    console.print(f"{len(found)} events from {len({s.track_id for s in states})} tracks: {kinds or 'none'}")
+    if output is not None:
+        write_jsonl(output, found)
+        console.print(f"events: {output}")
+    if truth is not None:
+        from .eval.events import event_table, read_agents_csv, read_incidents, score_events
+
+        scores = score_events(read_incidents(truth), found, read_agents_csv(truth))
+        console.print(event_table(scores, title="incidents against the simulator's labels"))
 
 
 def _track_camera(sources: list[Path], output: Path, *, detections: Path | None, detection_scale: float,
@@ -721,7 +821,9 @@ def demo(
     """Run the most complete job fusiontrack has: simulate, track, evaluate, and a real bag.
 
     Simulates a crowd (lasers, a camera 3 degrees off its calibration, ground truth), tracks the people
-    with the lasers, scores the tracks against the truth and renders a video with both; converts a real
+    with the lasers, scores the tracks against the truth and renders a video with both; learns the camera's
+    bias, tracks the crowd camera-only and fused through the corrected camera and writes ``report.html``
+    (metrics, bias convergence, time cost, videos); converts a real
     laser bag into a time-synchronised MCAP, reads it back and renders its preview; writes
     ``summary.json`` with what was measured.
     """
@@ -748,13 +850,17 @@ def demo(
         sim = run_simulation(scenario, output / "crowd", progress=lambda t: bar.update(task, completed=t))
     console.print(f"simulated {seconds:g} s of crowd: {sim.n_agents} people ({sim.mean_present:.1f} present on "
                   f"average), {sum(sim.messages.values())} sensor messages -> {output / 'crowd'}")
+    import time
+
     from .eval import evaluate_floor, metrics_table
     from .io.recording import Recording
     from .io.tracks import write_jsonl, write_tracks_csv
     from .tracking.tracker import track_recording
     from .types import GroundTruth
 
+    tic = time.perf_counter()
     states, events = track_recording(output / "crowd")
+    laser_s = time.perf_counter() - tic
     write_tracks_csv(output / "crowd_tracks.csv", states)
     write_jsonl(output / "crowd_tracks.jsonl", [*states, *events])
     with Recording(output / "crowd") as rec:
@@ -762,6 +868,17 @@ def demo(
     metrics = evaluate_floor(truth, states, threshold_m=0.5)
     console.print(metrics_table({"crowd (laser PF)": metrics}, title="tracking the simulated crowd, 0.5 m"))
     crowd_video = render_preview([output / "crowd"], output / "crowd.mp4", tracks=states)
+    from .demo import people_comparison
+
+    with progress() as bar:
+        task = bar.add_task("bias, camera-only and fused tracking", total=None)
+        people = people_comparison(output / "crowd", output, true_bias_deg=scenario.config.cameras[0].yaw_bias_deg,
+                                   laser_video="crowd.mp4", laser_states=states, laser_time_s=laser_s)
+        bar.update(task, completed=1, total=1)
+    console.print(f"camera bias learnt: {people['bias_deg']:.3f} deg (true "
+                  f"{scenario.config.cameras[0].yaw_bias_deg:g}); " + ", ".join(
+                      f"{k} MOTA {m['mota']:.3f} IDF1 {m['idf1']:.3f}" for k, m in people['metrics'].items())
+                  + f"; report: {output / 'report.html'}")
 
     desc = describe_recording([recording])
     _print_description(desc)
@@ -775,6 +892,7 @@ def demo(
                       "mean_present": sim.mean_present, "messages": sim.messages,
                       "situations": sim.situation_counts, "preview_frames": crowd_video.frames,
                       "tracks": len({s.track_id for s in states}), "metrics": metrics.to_dict()},
+        "people_comparison": people,
         "input": desc, "converted": round_trip,
         "preview": {"path": str(output / "preview.mp4"), "frames": real_video.frames,
                     "size_px": list(real_video.size_px), "tracks": len({s.track_id for s in real_states})},

@@ -8,7 +8,10 @@ boxes, ``laser/vehicles.py``; camera: blobs on the road plane, ``vision/vehicles
   ``x(t) = x(t_s) + v·(t − t_s)``.
 * **D5 association** (:func:`fuse_objects`): sensors are folded in one by one, lasers first (the most precise
   positions), each by a Hungarian assignment against the objects built so far, cost ``‖p_o − p_d‖`` plus a
-  size-compatibility penalty, gated at ``gate_m`` (2 m), at most one detection of a sensor per object.
+  size-compatibility penalty, gated at ``gate_m`` (2 m) — or, for the imprecise (a far camera's position is
+  metres uncertain along the view), within ``gate_chi2`` (99 %) of the summed covariances — at most one
+  detection of a sensor per object. Without the second gate a far camera blob 3 m from the laser box of the
+  same car became a second object (a duplicate track).
 * **D5 object model**: position = the information-weighted mean of the members' positions
   (``(Σ Σ_i⁻¹)⁻¹ Σ Σ_i⁻¹ x_i``, each branch's covariance: a laser box centre ~5 cm plus its partial-view
   uncertainty, a camera point the 2 px image noise through the homography, growing with distance); velocity from
@@ -42,6 +45,7 @@ class ObjectFusionParams:
     """D5 defaults. ``size_penalty`` is the cost (m) per metre of length disagreement."""
 
     gate_m: float = 2.0
+    gate_chi2: float = 9.21
     size_penalty: float = 0.25
     confidence_laser: float = 0.6
     confidence_camera: float = 0.4
@@ -113,13 +117,18 @@ def fuse_objects(per_sensor: dict[str, Sequence[Detection]], params: ObjectFusio
         if not clusters:
             clusters = [_Cluster(d) for d in dets]
             continue
-        cpos = np.array([c.position()[0] for c in clusters])
+        cps = [c.position() for c in clusters]
+        cpos = np.array([c[0] for c in cps])
         dpos = np.array([d.position_m for d in dets])
-        cost = np.linalg.norm(cpos[:, None] - dpos[None], axis=2)
+        diff = cpos[:, None] - dpos[None]
+        cost = np.linalg.norm(diff, axis=2)
+        S = np.array([c[1] for c in cps])[:, None] + np.array([d.covariance_m2 for d in dets])[None]
+        m2 = np.einsum("cdi,cdij,cdj->cd", diff, np.linalg.inv(S), diff)
+        near = (cost <= p.gate_m) | (m2 <= p.gate_chi2)
         clen = np.array([c.length() for c in clusters])
         dlen = np.array([_length(d) for d in dets])
         dl = np.abs(clen[:, None] - dlen[None])
-        cost_gated = np.where(cost <= p.gate_m, cost + p.size_penalty * np.nan_to_num(dl, nan=0.0), np.inf)
+        cost_gated = np.where(near, np.sqrt(m2) + p.size_penalty * np.nan_to_num(dl, nan=0.0), np.inf)
         pairs, _, free = hungarian(cost_gated, gate=np.inf)
         for a, b in pairs:
             clusters[a].members.append(dets[b])

@@ -5,17 +5,23 @@ model (the HSV histogram of its camera blobs). All modes' particles live in one 
 array, so prediction, weighting and resampling are one numpy pass over every particle (X1). Per step, on the
 fused object models of D5 (position, velocity, colour, class, confidence):
 
-* **S0** a fused object that no mode claims and that is farther than ``d_new_m`` from every mode centre starts a
-  mode: particles from N(pos, init_sigma_m²), velocity from the object (its laser track) or, unknown, from
-  N(0, init_sigma_v_mps²) (D6 says 0; a vehicle entering at 15 m/s would lag for seconds), colour from its
-  camera histogram. A mode is reported (``TrackState``) once it has been matched in ``n_confirm`` steps.
+* **S0** a fused object that no mode claims, seen with confidence >= ``min_spawn_confidence`` (0.6: a laser, or
+  both cameras; one camera's blob alone updates modes but does not start one — in a jam or after a light change
+  a single camera's foreground makes ghosts) and farther than ``d_new_m`` from every mode centre starts a
+  mode (an imprecise object: farther than 3 σ of its position): particles from N(pos, init_sigma_m²), velocity
+  from the object (its laser track) or, unknown, from N(0, init_sigma_v_mps²) (D6 says 0; a vehicle entering at
+  15 m/s would lag for seconds), colour from its camera histogram. A mode is reported (``TrackState``) once it
+  has been matched in ``n_confirm`` steps.
 * **S1** prediction by the constant-velocity model (Eq. 4), its noise ``σ_p, σ_v`` given per 25 Hz frame and
   scaled by ``sqrt(dt / 0.04 s)`` so the filter behaves the same at any sensor rate.
 * **S2** weights ``w ∝ p(y | x)`` (Eq. 3 with the transition prior as proposal), normalised within each mode
   (Eq. 7). Eq. 6: ``p(y | x) = exp(−d_col² / 2σ_col²) · exp(−‖pos − pos_model‖² / 2σ_pos²)`` with
-  ``pos_model`` the fused object matched to the mode. Matching is a Hungarian assignment of modes to objects on
-  the same negative log-likelihood (position from the predicted mode centre, gated at ``gate_m``; colour where
-  both have one). A mode with no object this step (an occlusion) keeps its predicted particles, uniform.
+  ``pos_model`` the fused object matched to the mode; ``σ_pos²`` is widened by half the trace of the object's
+  covariance (a camera-only object 60 m away is metres uncertain; D6's fixed 0.5 m let it drag the mode).
+  Matching is a Hungarian assignment of modes to objects on the same negative log-likelihood (position from the
+  predicted mode centre, gated at ``gate_m``; colour where both have one). A mode with no object this step (an
+  occlusion) keeps its predicted particles, uniform. A share ``velocity_injection`` of a matched mode's particles
+  takes the object's tracked velocity (a mixture proposal, Eq. 3's ``q``).
 * **S3** systematic resampling within each mode, one k-means pass (each particle to the nearest mode centre,
   then ``n_particles`` per mode redrawn from the particles now labelled with it), merging of modes closer than
   ``d_merge_m`` for ``n_merge`` consecutive steps (the older id survives), deletion of a mode whose mean
@@ -92,7 +98,9 @@ class VehiclePfParams:
     tau_del: float = 1e-3
     t_del_s: float = 3.0
     n_confirm: int = 3
-    report_coast_s: float = 1.0
+    report_coast_s: float = 0.5
+    min_spawn_confidence: float = 0.6
+    velocity_injection: float = 0.1
     colour_rate: float = 0.05
     colour_update_min: float = 0.5
     max_dt_s: float = 0.5
@@ -102,6 +110,10 @@ class VehiclePfParams:
         for f in fields(self):
             v = getattr(self, f.name)
             if f.name == "seed":
+                continue
+            if f.name in ("velocity_injection", "min_spawn_confidence"):
+                if not (isinstance(v, int | float) and 0 <= v <= 1):
+                    raise ConfigError(f"VehiclePfParams.{f.name}: expected a value in [0, 1], got {v!r}")
                 continue
             if f.name in ("n_particles", "n_merge", "n_confirm"):
                 if isinstance(v, bool) or not isinstance(v, int) or v < 1:
@@ -179,11 +191,15 @@ class VehicleModeTracker:
             return np.zeros(0, np.intp), np.zeros(0, np.intp)
         pos = np.array([o.position_m for o in objs])
         d = np.linalg.norm(self.centres()[:, None, 0:2] - pos[None], axis=2)
-        cost = 0.5 * (d / self.p.sigma_pos_m) ** 2
+        cost = 0.5 * d**2 / self._pos_var(objs)[None]
         cost += 0.5 * (self._colour_dist(objs) / self.p.sigma_col) ** 2
         cost[d > self.p.gate_m] = np.inf
         pairs, _, _ = hungarian(cost, gate=np.inf)
         return pairs[:, 0], pairs[:, 1]
+
+    def _pos_var(self, objs: Sequence[FusedObject]) -> np.ndarray:
+        """Per object, ``σ_pos² + ½ tr Σ_obj``: the position term of Eq. 6 widened by the object's own uncertainty."""
+        return self.p.sigma_pos_m**2 + 0.5 * np.array([np.trace(o.covariance_m2) for o in objs])
 
     def _colour_dist(self, objs: Sequence[FusedObject]) -> np.ndarray:
         """(n_modes, n_objects) Bhattacharyya distances; 0 where a mode or an object has no colour."""
@@ -225,13 +241,16 @@ class VehicleModeTracker:
             dcol = self._colour_dist(objects)[mi, oi]
             d2 = ((self.x[mi, :, 0:2] - pos[:, None, :]) ** 2).sum(axis=2)
             col = np.exp(-0.5 * (dcol / p.sigma_col) ** 2)
-            w = np.exp(-0.5 * d2 / p.sigma_pos_m**2) * col[:, None]
-            lik[mi] = w.mean(axis=1)
-            matched[mi] = True
+            var = self._pos_var(objects)[oi]
+            w_pos = np.exp(-0.5 * d2 / var[:, None])
+            w = w_pos * col[:, None]
+            lik[mi] = w_pos.mean(axis=1)  # deletion and colour update: the position term (two cameras see a car
+            matched[mi] = True             # from front and back; their colours differ more than σ_col allows)
             ok = w.sum(axis=1) > 0
             wn = np.where(ok[:, None], w, 1.0)
             idx = systematic_resample(wn, self.rng, flat_out=True)                   # S3.1
             self.x[mi] = self.x[mi].reshape(-1, 4)[idx].reshape(mi.size, p.n_particles, 4)
+            self._inject_velocity(mi, [objects[j] for j in oi])
             for m, j, lk in zip(mi, oi, lik[mi], strict=True):
                 o = objects[j]
                 if o.hist is not None and (self.hist[m] is None or lk > p.colour_update_min):
@@ -247,6 +266,19 @@ class VehicleModeTracker:
         self._merge_and_delete(t_ns)                                                  # S3.3, S3.4
         self._spawn(t_ns, objects, oi)                                                # S0
         return self._states(t_ns, sensors_of)
+
+    def _inject_velocity(self, modes: np.ndarray, objs: Sequence[FusedObject]) -> None:
+        """A share ``velocity_injection`` of each matched mode's particles takes the object's tracked velocity
+        (plus noise): the mixture proposal of Eq. 3. Without it a braking car's mode keeps its speed (the
+        random walk of σ_v cannot follow 2.5 m/s², and resampling narrows the velocities further)."""
+        k = round(self.p.velocity_injection * self.p.n_particles)
+        if k == 0:
+            return
+        for m, o in zip(modes, objs, strict=True):
+            if o.velocity_mps is None:
+                continue
+            sel = self.rng.choice(self.p.n_particles, k, replace=False)
+            self.x[m, sel, 2:4] = o.velocity_mps + standard_normal(self.rng, (k, 2)) * self.p.sigma_v_mps
 
     def _recluster(self) -> None:
         """One k-means pass: each particle to its nearest mode centre, then each mode redrawn from its particles."""
@@ -310,7 +342,10 @@ class VehicleModeTracker:
         centres = self.centres()[:, 0:2]
         for j in free:
             o = objects[j]
-            if centres.shape[0] and np.min(np.linalg.norm(centres - o.position_m, axis=1)) < p.d_new_m:
+            if o.confidence < p.min_spawn_confidence:
+                continue
+            reach = max(p.d_new_m, 3.0 * math.sqrt(0.5 * np.trace(o.covariance_m2)))  # an imprecise object: 3 σ
+            if centres.shape[0] and np.min(np.linalg.norm(centres - o.position_m, axis=1)) < reach:
                 continue
             x = np.empty((1, p.n_particles, 4))
             x[0, :, 0:2] = o.position_m + standard_normal(self.rng, (p.n_particles, 2)) * p.init_sigma_m

@@ -1,0 +1,330 @@
+"""The ``traffic`` pipeline (seed 003, ALGORITHMS.md D0–D8): lasers and cameras on a road, fused into vehicle
+models, tracked by the mode particle filter, read by scene understanding.
+
+One pass over the recording, every sensor in log order:
+
+1. each laser scan goes through the laser branch (``laser/vehicles.py``: background, road ROI, clustering, box
+   fitting, per-laser tracks), each image through the camera branch (``vision/vehicles.py``: MoG + shadows, road
+   ROI, blobs, ground position through the ground homography, per-camera tracks); both give
+   :class:`~fusiontrack.types.Detection` in the road frame;
+2. at a fixed rate (``rate_hz``, default 15 Hz, the cameras' rate) the latest frame of every sensor is moved to
+   the fusion instant (D2) and fused into object models (D5, ``fusion/objects.py``);
+3. the objects feed the trackers of the requested *variants*: ``fusion_pf`` (D6 mode particle filter, the
+   pipeline's output), and for comparison ``fusion`` (the same objects, a constant-velocity Kalman tracker),
+   ``laser`` and ``camera`` (objects from one sensor kind only, Kalman);
+4. the ``fusion_pf`` states go through scene understanding (D7/D8 rules, ``scene/``) online.
+
+``message_filter`` lets a benchmark inject faults (occlusions, blackouts) into the stream without touching the
+recording. Bad sensor data degrades: a branch that raises on a message logs it and the run goes on.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import ConfigError, RecordingError
+from ..io.recording import Recording
+from ..tracking.baseline import CVKalmanTracker
+from ..tracking.vehicle_pf import FusedObject, VehicleModeTracker, VehiclePfParams
+from ..types import Detection, Event, Image, LaserScan, TrackState
+from .objects import DetectionBuffer, ObjectFusionParams, fuse_objects, sensor_kind
+
+log = logging.getLogger(__name__)
+
+__all__ = ["VARIANTS", "TrafficParams", "TrafficResult", "roads_of", "track_traffic"]
+
+VARIANTS = {
+    "camera": "cameras only: camera objects, constant-velocity Kalman",
+    "laser": "lasers only: laser objects, constant-velocity Kalman",
+    "fusion": "D5 fused objects, constant-velocity Kalman",
+    "fusion_pf": "D5 fused objects, D6 mode particle filter (the pipeline's output)",
+}
+
+
+@dataclass(frozen=True, slots=True)
+class TrafficParams:
+    """Pipeline settings; the component parameters are passed to the component that owns them."""
+
+    rate_hz: float = 15.0
+    fusion: ObjectFusionParams = field(default_factory=ObjectFusionParams)
+    tracker: VehiclePfParams = field(default_factory=VehiclePfParams)
+    kalman: Mapping[str, Any] = field(default_factory=lambda: {"q": 2.0, "r_m": 0.3, "gate_m": 2.5,
+                                                               "n_confirm": 3, "n_miss": 30})
+    laser: Mapping[str, Any] = field(default_factory=dict)
+    camera: Mapping[str, Any] = field(default_factory=dict)
+    roi_margin_m: float = 5.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.rate_hz) and 0.5 <= self.rate_hz <= 100):
+            raise ConfigError(f"traffic.rate_hz: expected a rate in [0.5, 100] Hz, got {self.rate_hz!r}")
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any], source: str = "[traffic]") -> TrafficParams:
+        """From a pipeline file's ``[traffic]`` table: ``rate_hz``, and sub-tables ``fusion``, ``tracker``,
+        ``kalman``, ``laser``, ``camera``."""
+        from .objects import as_params
+
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - names)
+        if unknown:
+            raise ConfigError(f"{source}: unknown key(s) {unknown}; expected some of {sorted(names)}")
+        kw: dict[str, Any] = {k: v for k, v in values.items() if k in ("rate_hz", "roi_margin_m", "kalman",
+                                                                      "laser", "camera")}
+        if "fusion" in values:
+            kw["fusion"] = as_params(dict(values["fusion"]), f"{source}.fusion")
+        if "tracker" in values:
+            kw["tracker"] = VehiclePfParams.from_mapping(dict(values["tracker"]), f"{source}.tracker")
+        return cls(**kw)
+
+
+@dataclass
+class TrafficResult:
+    """What :func:`track_traffic` measured. ``states[variant]`` are the track states of each variant."""
+
+    states: dict[str, list[TrackState]]
+    tracker_events: list[Event]
+    scene_events: list[Event]
+    sensors: dict[str, str]
+    n_ticks: int = 0
+    duration_s: float = 0.0
+    timings_s: dict[str, float] = field(default_factory=dict)
+    detections: dict[str, int] = field(default_factory=dict)
+    errors: dict[str, int] = field(default_factory=dict)
+    t0_ns: int = 0
+
+    def speed_x_real_time(self, parts: Sequence[str] = ("laser_branch", "camera_branch", "fusion",
+                                                         "fusion_pf", "scene")) -> float:
+        """Recording seconds per processing second of the named parts (the pipeline's own work)."""
+        spent = sum(self.timings_s.get(p, 0.0) for p in parts)
+        return self.duration_s / spent if spent > 0 else math.inf
+
+
+def roads_of(source: Any) -> np.ndarray:
+    """Roads as ``(n, 5)`` rows ``(x0, y0, x1, y1, width)`` from a world.json path/mapping, a :class:`RoadGeometry`
+    (each road polygon by its minimum-area rectangle) or an array."""
+    from ..scene.road import RoadGeometry
+
+    if isinstance(source, RoadGeometry):
+        import cv2
+
+        rows = []
+        for road in source.roads:
+            (cx, cy), (w, h), ang = cv2.minAreaRect(road.polygon.astype(np.float32))
+            a = math.radians(ang)
+            length, width = (w, h) if w >= h else (h, w)
+            if w < h:
+                a += math.pi / 2
+            d = np.array([math.cos(a), math.sin(a)]) * length / 2
+            rows.append([cx - d[0], cy - d[1], cx + d[0], cy + d[1], width])
+        return np.array(rows, np.float64)
+    if isinstance(source, str | Path):
+        path = Path(source)
+        try:
+            source = json.loads(path.read_text())
+        except (OSError, ValueError) as err:
+            raise ConfigError(f"{path}: cannot read the roads ({err})") from err
+    if isinstance(source, Mapping):
+        if "roads" not in source:
+            raise ConfigError(f"roads: no 'roads' entry (keys: {sorted(source)})")
+        source = source["roads"]
+    arr = np.asarray(source, np.float64).reshape(-1, 5)
+    if not arr.shape[0]:
+        raise ConfigError("roads: the scene has no road")
+    return arr
+
+
+def _world_json(path: Path) -> Path | None:
+    for cand in (path / "ground_truth" / "world.json", path.parent / "ground_truth" / "world.json"):
+        if cand.is_file():
+            return cand
+    return None
+
+
+def _roi_polygon(roads: np.ndarray, margin_m: float) -> np.ndarray:
+    """The convex hull of every road rectangle widened by ``margin_m`` (the area where modes may live)."""
+    from scipy.spatial import ConvexHull
+
+    a, b, w = roads[:, 0:2], roads[:, 2:4], roads[:, 4]
+    d = (b - a) / np.linalg.norm(b - a, axis=1, keepdims=True)
+    n = np.column_stack([-d[:, 1], d[:, 0]]) * (w[:, None] / 2 + margin_m)
+    a, b = a - d * margin_m, b + d * margin_m
+    pts = np.concatenate([a - n, b - n, b + n, a + n])
+    return pts[ConvexHull(pts).vertices]
+
+
+def _as_detection(o: FusedObject, t_ns: int, sensor: str) -> Detection:
+    return Detection(t_ns, sensor, o.position_m, o.covariance_m2 + np.eye(2) * 1e-4, cls=o.cls,
+                     score=o.confidence)
+
+
+class _KalmanVariant:
+    """A constant-velocity Kalman tracker on fused objects of some sensors (the comparison variants)."""
+
+    def __init__(self, name: str, kinds: tuple[str, ...], kalman: Mapping[str, Any], frame_s: float) -> None:
+        self.name, self.kinds = name, kinds
+        self.tracker = CVKalmanTracker(frame_s=frame_s, sensor=name, **dict(kalman))
+        self.cls: dict[int, str] = {}
+
+    def step(self, t_ns: int, objects: list[FusedObject]) -> list[TrackState]:
+        states = self.tracker.step(t_ns, [_as_detection(o, t_ns, self.name) for o in objects])
+        return states
+
+
+def _select(per_sensor: Mapping[str, list[Detection]], kinds: tuple[str, ...]) -> dict[str, list[Detection]]:
+    return {s: d for s, d in per_sensor.items() if d and sensor_kind(d[0]) in kinds}
+
+
+def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, rules: Any = None,
+                  params: TrafficParams | None = None, variants: Iterable[str] = ("fusion_pf",),
+                  time_source: str = "header", message_filter: Callable[[Any], Any] | None = None,
+                  progress: Callable[[float], None] | None = None, start_ns: int | None = None,
+                  stop_ns: int | None = None) -> TrafficResult:
+    """Run the traffic pipeline over a recording (module docstring).
+
+    Parameters
+    ----------
+    path : recording folder or file
+    roads : (n, 5) rows, world.json path, or None
+        The road(s) the branches watch; default: the ``geometry``'s roads, else the simulator's
+        ``ground_truth/world.json`` beside the recording.
+    geometry : RoadGeometry or path of a road TOML, optional
+        Lanes and zones for scene understanding; default: built from world.json.
+    rules : SceneRules or path of a rules TOML, optional
+        D8 rules (default: the shipped ones). Scene understanding needs a geometry.
+    params : TrafficParams
+    variants : names of :data:`VARIANTS`
+    message_filter : callable(message) -> message or None, optional
+        Applied to every sensor message before its branch (``None`` drops it): fault injection.
+    """
+    from ..laser.vehicles import vehicle_detector_for_recording
+    from ..scene import SceneUnderstanding, default_rules, load_road_geometry, load_rules, road_geometry_from_world
+    from ..scene.road import RoadGeometry
+    from ..vision.vehicles import VehicleDetectorParams, vehicle_detectors_for_recording
+
+    p = params or TrafficParams()
+    variants = tuple(variants)
+    bad = [v for v in variants if v not in VARIANTS]
+    if bad or not variants:
+        raise ConfigError(f"variants: expected some of {sorted(VARIANTS)}, got {list(variants)}")
+    path = Path(path)
+    world = _world_json(path)
+    if isinstance(geometry, str | Path):
+        geometry = load_road_geometry(geometry)
+    if geometry is None and world is not None:
+        geometry = road_geometry_from_world(world)
+    if roads is None:
+        if isinstance(geometry, RoadGeometry):
+            roads = roads_of(geometry)
+        elif world is not None:
+            roads = roads_of(world)
+        else:
+            raise ConfigError(f"{path}: no road geometry: give the roads (a road TOML with --geometry) — the "
+                              "recording has no ground_truth/world.json beside it")
+    roads = roads_of(roads)
+    if isinstance(rules, str | Path):
+        rules = load_rules(rules)
+    scene = SceneUnderstanding(geometry, rules or default_rules(), sensor="fusion_pf") if geometry else None
+    frame_s = 1.0 / p.rate_hz
+    pf = VehicleModeTracker(p.tracker, roi_m=_roi_polygon(roads, p.roi_margin_m), sensor="fusion_pf") \
+        if "fusion_pf" in variants else None
+    kinds = {"camera": ("camera",), "laser": ("laser",), "fusion": ("laser", "camera")}
+    kal = {v: _KalmanVariant(v, kinds[v], p.kalman, frame_s) for v in variants if v != "fusion_pf"}
+    states: dict[str, list[TrackState]] = {v: [] for v in variants}
+    tracker_events: list[Event] = []
+    scene_events: list[Event] = []
+    timings = dict.fromkeys(("laser_branch", "camera_branch", *variants, "scene"), 0.0)
+    counts: dict[str, int] = {}
+    errors: dict[str, int] = {}
+    buffer = DetectionBuffer(max(p.fusion.max_age_s, frame_s))
+    with Recording(path) as rec:
+        try:
+            laser, laser_topics = vehicle_detector_for_recording(rec, roads, time_source=time_source, **p.laser)
+        except ConfigError as err:
+            if "no LaserScan topic" not in str(err):
+                raise
+            laser, laser_topics = None, []
+        cam_params = VehicleDetectorParams(**dict(p.camera)) if p.camera else None
+        try:
+            cams = vehicle_detectors_for_recording(rec, roads, params=cam_params)
+        except RecordingError as err:
+            if "no camera with a CameraInfo" not in str(err):
+                raise
+            cams = {}
+        if laser is None and not cams:
+            raise RecordingError(f"{path}: neither LaserScan nor camera topics: nothing to track")
+        cam_by_sensor = {d.camera_name: d for _, d in cams.values()}
+        topics = [*laser_topics, *(t for t, _ in cams.values())]
+        sensors = {**dict.fromkeys(laser.scanners if laser else (), "laser"), **dict.fromkeys(cam_by_sensor,
+                                                                                               "camera")}
+        t_first, t_last = rec.start_ns, rec.end_ns
+        span = max(t_last - t_first, 1)
+        next_tick: int | None = None
+        first_t: int | None = None
+        n_ticks = 0
+        last_t = None
+
+        def tick(t_ns: int) -> None:
+            per_sensor = buffer.at(t_ns)
+            for v, k in kal.items():
+                tic = time.perf_counter()
+                objs = fuse_objects(_select(per_sensor, k.kinds), p.fusion)
+                states[v].extend(k.step(t_ns, objs))
+                timings[v] += time.perf_counter() - tic
+            if pf is not None:
+                tic = time.perf_counter()
+                objs = fuse_objects(per_sensor, p.fusion)
+                out = pf.step(t_ns, objs)
+                tracker_events.extend(pf.events)
+                states["fusion_pf"].extend(out)
+                timings["fusion_pf"] += time.perf_counter() - tic
+                if scene is not None:
+                    tic = time.perf_counter()
+                    scene.update(t_ns, out)
+                    timings["scene"] += time.perf_counter() - tic
+
+        for msg in rec.messages(topics, time_source=time_source, start_ns=start_ns, stop_ns=stop_ns):
+            if message_filter is not None:
+                msg = message_filter(msg)
+                if msg is None:
+                    continue
+            t = msg.t_ns
+            if next_tick is None:
+                next_tick = first_t = t
+            while t >= next_tick:
+                tick(next_tick)
+                n_ticks += 1
+                next_tick += round(frame_s * 1e9)
+            last_t = t
+            try:
+                if isinstance(msg, LaserScan) and laser is not None:
+                    tic = time.perf_counter()
+                    dets = laser(msg)
+                    timings["laser_branch"] += time.perf_counter() - tic
+                elif isinstance(msg, Image) and msg.sensor in cam_by_sensor and msg.encoding != "mono16":
+                    tic = time.perf_counter()
+                    dets = cam_by_sensor[msg.sensor](msg)
+                    timings["camera_branch"] += time.perf_counter() - tic
+                else:
+                    continue
+            except (ValueError, FloatingPointError) as err:  # bad data in one message: skip it, keep going
+                errors[msg.sensor] = errors.get(msg.sensor, 0) + 1
+                log.warning("%s at %d ns: message skipped (%s)", msg.sensor, t, err)
+                continue
+            counts[msg.sensor] = counts.get(msg.sensor, 0) + len(dets)
+            buffer.put(msg.sensor, t, dets)
+            if progress is not None:
+                progress(min(1.0, (t - t_first) / span))
+        if scene is not None:
+            scene_events = scene.events  # ended ones with their end, open ones with t_end_ns None
+    duration = (last_t - first_t) / 1e9 if last_t is not None and first_t is not None else 0.0
+    return TrafficResult(states, tracker_events, scene_events, sensors, n_ticks, duration, timings, counts, errors,
+                         first_t or 0)
