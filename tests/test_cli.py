@@ -106,6 +106,14 @@ def test_demo_writes_its_outputs(shared_data, tmp_path):
     assert summary["simulated"]["preview_frames"] >= 40  # ~45 camera frames, 1 % of them dropped
     assert summary["simulated"]["tracks"] >= 1
     assert 0.0 <= summary["simulated"]["metrics"]["recall"] <= 1.0
+    people = summary["people_comparison"]
+    assert set(people["metrics"]) == {"laser only", "camera only", "fusion"}
+    assert people["camera_frames_read_by_fusion"] <= people["camera_frames"]  # the camera read only when needed
+    report = (out / "report.html").read_text()
+    for part in ("Camera bias convergence", "camera only", "fusion", "Time cost", "camera_overlay.mp4",
+                 "data:image/png;base64"):
+        assert part in report
+    assert (out / "camera_overlay.mp4").stat().st_size > 0
     assert summary["input"]["topics"][0]["count"] == 1265
     assert summary["converted"]["topics"][0]["count"] == 1265
     assert summary["preview"]["frames"] == 1265
