@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-dev
 
-.PHONY: demo test lint bench bench-io bench-laser bench-camera bench-fusion bench-imu bench-baselines clean install
+.PHONY: demo test lint bench bench-io bench-laser bench-camera bench-fusion bench-imu bench-traffic bench-baselines clean install
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -28,7 +28,7 @@ demo: $(STAMP)
 
 # Benchmarks print tables; each group takes a few minutes on 2 cores. `make bench` runs them all but the
 # Stone Soup comparison, which needs an optional extra (`make bench-baselines` installs it).
-bench: bench-io bench-laser bench-camera bench-fusion bench-imu
+bench: bench-io bench-laser bench-camera bench-fusion bench-imu bench-traffic
 
 bench-io: $(STAMP)
 	$(BIN)/python benchmarks/read_throughput.py
@@ -52,6 +52,12 @@ bench-imu: $(STAMP)
 	$(BIN)/python benchmarks/pdr_steps.py
 	$(BIN)/python benchmarks/rgbd_compressive.py
 	$(BIN)/python benchmarks/pdr.py
+
+bench-traffic: $(STAMP)
+	$(BIN)/python benchmarks/laser_vehicles.py
+	$(BIN)/python benchmarks/camera_vehicles.py
+	$(BIN)/python benchmarks/scene.py
+	$(BIN)/python benchmarks/traffic.py
 
 bench-baselines: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[dev,stonesoup]"
