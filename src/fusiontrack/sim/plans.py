@@ -484,3 +484,72 @@ def road_plans(world: StaticWorld, duration_s: float = 120.0, rng: np.random.Gen
             incident_t_s=float(e["t"] + e.get("at", 0.0) * length / speed) if incident else 0.0,
             incident_duration_s=float(e.get("duration", 0.0)), slow_speed_mps=1.0))
     return [], plans
+
+
+WEARABLE_LAYOUTS = ("face_to_face", "four_corners", "loop")
+
+
+def wearable_plans(world: StaticWorld, duration_s: float = 20.0, rng: np.random.Generator | int | None = None,
+                   layout: str = "face_to_face", phones: tuple[str, ...] = ("phone_a", "phone_b"),
+                   still_s: float = 6.0, stagger_s: float = 1.5, first_id: int = 0) -> Plans:
+    """Seed 002's second and third experiments: phone carriers in a room, each standing still first (C1).
+
+    Person ``k`` (``agent_id = first_id + k``) carries ``phones[k]``; everybody stands ``still_s`` (plus a
+    stagger: the k-th to leave waits ``k x stagger_s`` longer, ±0.3 s, in a random order) where they start,
+    then walks, and stays at the end of their route.
+
+    * ``"face_to_face"`` (2 people, P002 Fig. 11): they start on a line across the room at ``x = ±0.32 x``
+      the room's width, 0.4 m either side of the middle line, walk towards each other past the middle to
+      ``∓0.2 x`` the width, turn and walk back to where they started: they meet twice.
+    * ``"four_corners"`` (4 people, Figs. 12-13): they start at ``(±0.32 width, ±0.25 depth)`` and walk to
+      the diagonally opposite start through points near the middle: many occlusions.
+    * ``"loop"`` (1-4 people, Fig. 14): a rectangle of 0.5 x 0.45 of the room round its middle, walked
+      anticlockwise from evenly spaced starting corners for the whole run.
+    """
+    if layout not in WEARABLE_LAYOUTS:
+        raise ConfigError(f"layout: expected one of {', '.join(WEARABLE_LAYOUTS)}, got {layout!r}")
+    phones = tuple(str(p) for p in phones)
+    n = len(phones)
+    sizes = {"face_to_face": (2, 2), "four_corners": (4, 4), "loop": (1, 4)}[layout]
+    if not sizes[0] <= n <= sizes[1] or len(set(phones)) != n or not all(phones):
+        raise ConfigError(f"phones: layout {layout!r} needs {sizes[0]}-{sizes[1]} distinct non-empty phone names, "
+                          f"got {list(phones)}")
+    if still_s < 0 or stagger_s < 0:
+        raise ConfigError(f"still_s, stagger_s: expected values >= 0, got {still_s}, {stagger_s}")
+    rng = _rng(rng)
+    x0, y0, x1, y1 = world.bounds_m
+    mid = np.array([x0 + x1, y0 + y1]) / 2
+    w, d = x1 - x0, y1 - y0
+    if layout == "face_to_face":
+        a, b, off = 0.32 * w, 0.2 * w, 0.4
+        routes = [np.array([[-a, off], [b, off], [-a, off]]), np.array([[a, -off], [-b, -off], [a, -off]])]
+        turn = 0.5
+    elif layout == "four_corners":
+        sx, sy = np.array([-1, 1, 1, -1]), np.array([-1, 1, -1, 1])
+        routes = [np.array([[s * 0.32 * w, t * 0.25 * d], [-s * 0.05 * w, t * 0.04 * d],
+                            [-s * 0.32 * w, -t * 0.25 * d]]) for s, t in zip(sx, sy, strict=True)]
+        turn = 0.0
+    else:
+        hx, hy = 0.25 * w, 0.225 * d
+        corners = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
+        loop_m = 2 * (2 * hx + 2 * hy)
+        laps = int(np.ceil(1.6 * max(duration_s, 1.0) / loop_m)) + 1
+        routes = []
+        for k in range(n):
+            start = (k * 4) // n
+            order = np.roll(corners, -start, axis=0)
+            routes.append(np.vstack([order] * laps + [order[:1]]))
+        turn = 0.0
+    order = rng.permutation(n)
+    looks = draw_appearances(n, rng)
+    plans = []
+    for k in range(n):
+        route = routes[k] + mid
+        waits = np.zeros(route.shape[0])
+        waits[0] = still_s + stagger_s * int(np.flatnonzero(order == k)[0]) + rng.uniform(-0.3, 0.3) * (stagger_s > 0)
+        if layout == "face_to_face":
+            waits[1] = turn
+        plans.append(_walker(first_id + k, 0.0, route, waits, rng, looks[k],
+                             speed=float(np.clip(_draw_speed(rng), 0.95, 1.45)), leave_at_end=False,
+                             phone=phones[k]))
+    return plans, []

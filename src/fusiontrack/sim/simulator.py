@@ -69,6 +69,7 @@ PLAN_GENERATORS: dict[str, Callable[..., Any]] = {
     "crowd": plan_generators.crowd_plans,
     "corridor": plan_generators.corridor_plans,
     "road": plan_generators.road_plans,
+    "wearable": plan_generators.wearable_plans,
 }
 
 
