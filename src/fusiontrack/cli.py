@@ -323,6 +323,9 @@ PIPELINES = {
     "people": "people tracked with 2D lasers and a camera: per-target classifiers learnt online name the "
               "people at splits (seed 001's tracking-learning loop)",
     # seed 003 (fusiontrack.fusion.traffic): lasers and cameras on a road, vehicle models, incidents
+    # seed 002 (fusiontrack.fusion.wearable): phones (IMU) + RGB-D cameras
+    "wearable": "people identified by the phone they carry: dead reckoning corrected by RGB-D fixes, visual "
+                "trackers per camera checked by the projected inertial position (failure / recovery events)",
     "traffic": "vehicles on a road from lasers and cameras: fused object models, mode particle filter, incidents "
                "(stopped vehicle, road leaving, jam, wrong way)",
 }
@@ -380,6 +383,9 @@ def track(
     if pipeline != "traffic" and any(traffic_only.values()):
         given = ", ".join(k for k, v in traffic_only.items() if v)
         raise ConfigError(f"{given}: only for --pipeline traffic (got --pipeline {pipeline})")
+    if pipeline == "wearable":
+        _track_wearable(recordings, output, config=config, seed=seed)
+        return
     if pipeline == "traffic":
         _track_traffic(recordings, output, config=config, geometry=geometry, rules=rules, compare=compare,
                        video=video, time_source=time_source)
@@ -448,6 +454,31 @@ def track(
 
         drawn = render_preview(recordings, output / "tracks.mp4", tracks=states)
         console.print(f"video: {output / 'tracks.mp4'} ({drawn.frames} frames)")
+
+
+def _track_wearable(sources: list[Path], output: Path, *, config: Path | None, seed: int) -> None:
+    """``track --pipeline wearable``: seed 002's pipeline; per phone the corrected trajectory, boxes and events."""
+    from .fusion.wearable import run_wearable
+
+    if len(sources) != 1:
+        raise ConfigError(f"wearable: one recording at a time (got {len(sources)})")
+    cfg = _load_config(config)
+    options = {"seed": seed, **cfg.wearable}
+    with progress() as bar:
+        task = bar.add_task("tracking (wearable)", total=None)
+        summary = run_wearable(sources[0], output, **options)
+        bar.update(task, completed=1, total=1)
+    table = Table(title="people by phone")
+    for col in ("phone", "status", "steps", "distance m", "RGB-D fixes", "corrected from s", "visual failures",
+                "recoveries"):
+        table.add_column(col, justify="left" if col in ("phone", "status") else "right")
+    for phone, p in summary["people"].items():
+        fails = sum(c["failures"] for c in p["cameras"].values())
+        recs = sum(c["recoveries"] for c in p["cameras"].values())
+        table.add_row(phone, p["status"], str(p["steps"]), f"{p['distance_m']:.1f}", str(p["fixes"]),
+                      "–" if p["corrected_from_s"] is None else f"{p['corrected_from_s']:.1f}", str(fails), str(recs))
+    console.print(table)
+    console.print(f"events {summary['events'] or 'none'} -> {output}")
 
 
 def _track_traffic(sources: list[Path], output: Path, *, config: Path | None, geometry: Path | None,

@@ -101,6 +101,9 @@ class PipelineConfig(_Model):
     """Laser detector parameters (keyword arguments of ``LaserPeopleDetector``; checked by it)."""
     tracking: dict[str, Any] = Field(default_factory=dict)
     """Tracker parameters (fields of ``TrackerParams``; checked by it)."""
+    wearable: dict[str, Any] = Field(default_factory=dict)
+    """The wearable pipeline's options (fields of ``WearableParams`` / ``AssocParams`` / ``VisualParams``;
+    checked by ``run_wearable``)."""
     traffic: dict[str, Any] = Field(default_factory=dict)
     """The traffic pipeline's settings (``TrafficParams.from_mapping``: rate_hz, fusion, tracker, kalman, laser,
     camera; checked by it)."""
