@@ -74,8 +74,9 @@ def _pick_occlusions(gt: list[GroundTruth], n: int, duration_s: float) -> list[d
             continue
         g, g_end = gt[i], gt[j_end]
         speed = np.linalg.norm(g.velocities_mps, axis=1)
+        end_x = {int(i): abs(x) for i, x in zip(g_end.ids, g_end.positions_m[:, 0], strict=True)}
         ok = [a for a in range(len(g)) if g.classes[a] == "car" and speed[a] > 3 and abs(g.positions_m[a, 0]) < 25
-              and g.ids[a] in g_end.ids and all(g.ids[a] != o["id"] for o in out)]
+              and end_x.get(int(g.ids[a]), 99.0) < 35 and all(g.ids[a] != o["id"] for o in out)]
         if ok:
             out.append({"id": int(g.ids[ok[0]]), "t0": int(t[i]), "t1": int(t[i] + d * 1e9), "d": d})
     return out
@@ -98,6 +99,15 @@ class Occluder:
                 if isinstance(m, Image) and m.encoding == "mono16":
                     self.labels[(m.sensor, m.t_ns)] = m.pixels
         self.hidden = 0
+        self.illumination: dict[str, list[tuple[int, float]]] = {}
+
+    def gain(self, sensor: str, t_ns: int) -> float:
+        """The camera's illumination gain in force at ``t_ns`` relative to the plate's (taken at gain 1)."""
+        g = 1.0
+        for t0, value in self.illumination.get(sensor, []):
+            if t_ns >= t0:
+                g = value
+        return g
 
     def _active(self, t_ns: int) -> list[dict[str, Any]]:
         return [o for o in self.occl if o["t0"] <= t_ns <= o["t1"]]
@@ -114,7 +124,8 @@ class Occluder:
             if not mask.any():
                 return msg
             data = msg.pixels.copy()
-            data[mask] = self.cam_plate[msg.sensor][mask]
+            gain = self.gain(msg.sensor, msg.t_ns)  # the plate was taken before the light changed
+            data[mask] = np.clip(self.cam_plate[msg.sensor][mask] * gain, 0, 255).astype(np.uint8)
             self.hidden += 1
             return replace(msg, pixels=data)
         if isinstance(msg, LaserScan) and msg.sensor in self.poses:
@@ -154,6 +165,7 @@ def run_seed(seed: int, seconds: float, folder: Path) -> dict[str, Any]:
         plates = _plates(rec, rec.start_ns + int(20e9))
         occl = _pick_occlusions(gt, 5, seconds)
         occluder = Occluder(rec, gt, occl, plates)
+        occluder.illumination["camera_0"] = [(gt[0].t_ns + int(seconds / 3 * 1e9), 0.55)]
     p = TrafficParams()
     tic = time.perf_counter()
     res = track_traffic(rec_dir, params=p, variants=tuple(VARIANTS), message_filter=occluder)

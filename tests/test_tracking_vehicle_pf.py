@@ -125,7 +125,9 @@ def test_coasting_modes_are_reported_for_report_coast_s_only():
     for k in range(10):
         trk.step(k * DT_NS, [_obj((0.0, 0.0))])
     reported = [(k - 9) * DT_NS for k in range(10, 60) if trk.step(k * DT_NS, [])]
-    assert reported and max(reported) <= 0.5e9 and trk.ids.size == 1
+    assert reported
+    assert max(reported) <= 0.5e9
+    assert trk.ids.size == 1
 
 
 def test_bhattacharyya_distance_known_values():

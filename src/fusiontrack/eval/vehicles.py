@@ -63,18 +63,27 @@ def evaluate_vehicles(frames: Sequence[GroundTruth], states: Sequence[TrackState
                       threshold_m: float = 2.0, margin_m: float = 2.0, rate_hz: float | None = None) -> Metrics:
     """CLEAR MOT / identity / HOTA of vehicle tracks inside ``area`` (tracks within ``margin_m`` of it kept).
 
-    Truth frames are those nearest the tracker's instants (:func:`truth_at`); the time tolerance is half the
-    tracker period (from ``rate_hz``, else from the states' own instants).
+    Truth frames are those nearest the tracker's instants (:func:`truth_at`) — every instant of its clock over
+    the truth's span, reported or not; the time tolerance is half the tracker period (from ``rate_hz``, else from
+    the states' own instants).
     """
+    frames = sorted(frames, key=lambda g: g.t_ns)
     times = np.unique(np.array([s.t_ns for s in states], np.int64))
-    if times.size == 0:
-        times = np.array([g.t_ns for g in frames], np.int64)
+    own = float(np.median(np.diff(times))) if times.size > 1 else 1e8
+    period = 1e9 / rate_hz if rate_hz else own
+    if frames:
+        # every instant of the tracker's clock over the truth's span, not only those with states: instants where
+        # the tracker reported nothing still have vehicles to miss (FN)
+        phase = int(times[0]) if times.size else frames[0].t_ns
+        n0 = int(np.ceil((frames[0].t_ns - phase) / period))
+        n1 = int(np.floor((frames[-1].t_ns - phase) / period))
+        grid = phase + np.round(np.arange(n0, n1 + 1) * period).astype(np.int64)
+        times = np.union1d(grid, times)
     gt = truth_at(frames, times, area=area)
     if area is not None and states:
         xy = np.array([s.position_m for s in states])
         keep = _inside(area, xy) | (_edge_distance(area, xy) <= margin_m)
         states = [s for s, k in zip(states, keep, strict=True) if k]
-    period = 1e9 / rate_hz if rate_hz else (float(np.median(np.diff(times))) if times.size > 1 else 1e8)
     return evaluate_floor(gt, states, threshold_m=threshold_m, classes=None,
                           time_tolerance_ns=int(period / 2) + 1, name="vehicles")
 

@@ -101,8 +101,8 @@ class TrafficResult:
     errors: dict[str, int] = field(default_factory=dict)
     t0_ns: int = 0
 
-    def speed_x_real_time(self, parts: Sequence[str] = ("laser_branch", "camera_branch", "fusion",
-                                                         "fusion_pf", "scene")) -> float:
+    def speed_x_real_time(self, parts: Sequence[str] = ("laser_branch", "camera_branch", "fusion_pf", "scene")
+                          ) -> float:
         """Recording seconds per processing second of the named parts (the pipeline's own work)."""
         spent = sum(self.timings_s.get(p, 0.0) for p in parts)
         return self.duration_s / spent if spent > 0 else math.inf

@@ -40,7 +40,8 @@ def evaluate_traffic(result: TrafficResult, path: str | Path, *, area: Any = Non
                      rate_hz: float | None = None) -> dict[str, Any]:
     """Metrics of every variant against the recording's ``/ground_truth`` and incident scores (when it has them).
 
-    ``area`` defaults to the sensors' common ground: the roads (from world.json) cut to the span the sensors see.
+    ``area`` (a polygon) limits the scored vehicles and tracks; ``None`` scores the whole scene (the CLI passes the
+    roads with a 3 m verge: vehicles no sensor can see near the road's far ends then count as missed).
     """
     from ..eval.events import read_agents_csv, read_incidents, score_events
     from ..eval.vehicles import evaluate_vehicles
@@ -95,7 +96,13 @@ def run_traffic(recording: str | Path, output: str | Path, *, geometry: Any = No
         "x_real_time": result.speed_x_real_time(), "tracks": len({s.track_id for s in states}),
         "events": _count_kinds(result.scene_events),
     }
-    summary.update(evaluate_traffic(result, recording, rate_hz=p.rate_hz))
+    area = None
+    world = recording / "ground_truth" / "world.json"
+    if world.is_file():
+        from .traffic import _roi_polygon, roads_of
+
+        area = _roi_polygon(roads_of(world), 3.0)
+    summary.update(evaluate_traffic(result, recording, area=area, rate_hz=p.rate_hz))
     if video:
         from ..viz.preview import render_preview
 

@@ -191,9 +191,9 @@ class VehicleModeTracker:
             return np.zeros(0, np.intp), np.zeros(0, np.intp)
         pos = np.array([o.position_m for o in objs])
         d = np.linalg.norm(self.centres()[:, None, 0:2] - pos[None], axis=2)
-        cost = 0.5 * d**2 / self._pos_var(objs)[None]
-        cost += 0.5 * (self._colour_dist(objs) / self.p.sigma_col) ** 2
-        cost[d > self.p.gate_m] = np.inf
+        m2 = d**2 / self._pos_var(objs)[None]
+        cost = 0.5 * m2 + 0.5 * (self._colour_dist(objs) / self.p.sigma_col) ** 2
+        cost[(d > self.p.gate_m) & (m2 > 9.0)] = np.inf  # an imprecise object may be 3 σ away (as in S0)
         pairs, _, _ = hungarian(cost, gate=np.inf)
         return pairs[:, 0], pairs[:, 1]
 
@@ -342,7 +342,7 @@ class VehicleModeTracker:
         centres = self.centres()[:, 0:2]
         for j in free:
             o = objects[j]
-            if o.confidence < p.min_spawn_confidence:
+            if o.confidence < p.min_spawn_confidence or not self._inside_roi(o.position_m[None])[0]:
                 continue
             reach = max(p.d_new_m, 3.0 * math.sqrt(0.5 * np.trace(o.covariance_m2)))  # an imprecise object: 3 σ
             if centres.shape[0] and np.min(np.linalg.norm(centres - o.position_m, axis=1)) < reach:
