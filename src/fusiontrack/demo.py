@@ -83,7 +83,7 @@ def people_comparison(recording: str | Path, output: str | Path, *, camera: str 
     rows = [{"pipeline": k, "MOTA": m.mota, "IDF1": m.idf1, "HOTA": m.hota, "ID switches": m.id_switches,
              "FP": m.fp, "FN": m.fn} for k, m in metrics.items()]
     n_scans = max(_frames(runs["laser only"]), 1)
-    cost = [{"part": k, "seconds": v, "ms per laser scan": 1e3 * v / n_scans} for k, v in times.items()]
+    cost = [{"part": k, "seconds": v, "ms per laser tracking step": 1e3 * v / n_scans} for k, v in times.items()]
 
     h = bias.history
     t = (h.t_ns - h.t_ns[0]) / 1e9 if len(h) else np.zeros(0)
