@@ -234,14 +234,9 @@ class SceneClassifier:
 
     @classmethod
     def load(cls, path: str | Path) -> SceneClassifier:
-        path = Path(path)
-        try:
-            data = json.loads(path.read_text())
-        except FileNotFoundError as err:
-            raise ConfigError(f"{path}: scene classifier file not found") from err
-        except json.JSONDecodeError as err:
-            raise ConfigError(f"{path}: not JSON: {err}") from err
-        return cls.from_dict(data, str(path))
+        from ..io.datafile import read_json
+
+        return cls.from_dict(read_json(path, "scene classifier"), str(path))
 
 
 @functools.cache

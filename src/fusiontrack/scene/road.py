@@ -47,7 +47,6 @@ from __future__ import annotations
 
 import json
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -560,16 +559,9 @@ def parse_road_geometry(data: dict[str, Any], source: str = "<geometry>") -> Roa
 
 def load_road_geometry(path: str | Path) -> RoadGeometry:
     """Read and validate a road geometry TOML file (format in the module docstring)."""
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError as err:
-        raise ConfigError(f"road geometry file not found: {path}") from err
-    except OSError as err:
-        raise ConfigError(f"{path}: cannot read the road geometry file: {err.strerror}") from err
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{path}: not valid TOML: {err}") from err
-    return parse_road_geometry(data, str(path))
+    from ..io.datafile import read_toml
+
+    return parse_road_geometry(read_toml(path, "road geometry"), str(path))
 
 
 # --------------------------------------------------------------------------------------------------

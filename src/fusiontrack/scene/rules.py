@@ -342,16 +342,9 @@ def load_rules(path: str | Path | None = None) -> SceneRules:
     """Read a rules TOML file; ``None`` gives the shipped defaults (:func:`default_rules`)."""
     if path is None:
         return default_rules()
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError as err:
-        raise ConfigError(f"rules file not found: {path}") from err
-    except OSError as err:
-        raise ConfigError(f"{path}: cannot read the rules file: {err.strerror}") from err
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{path}: not valid TOML: {err}") from err
-    return parse_rules(data, str(path))
+    from ..io.datafile import read_toml
+
+    return parse_rules(read_toml(path, "rules"), str(path))
 
 
 def default_rules_text() -> str:
