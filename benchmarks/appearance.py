@@ -9,7 +9,9 @@ box (B17 box score). Each time is the median over ``--frames`` frames, best of `
 Learning curve, on a simulated `crossing` (10 s, seed 0): people 0 and 1 learnt from their true boxes in
 frames 40-98 (every other frame), judged on the unseen frames 100-124 (tests/test_vision_appearance_sim.py):
 AUC of box scores, AUC of single patches on the person, mean confidence margin, after 1..30 training frames,
-averaged over ``--banks`` random streams.
+averaged over ``--banks`` random streams; for B13's literal mean R, G, B per cell (``colour="rgb"``), for the
+default intensity + chromaticity ``(I, r, g)`` per cell, and with twice the learners. Person 2 enters the
+training frames only at the 14th, so the first rows also rank a person the classifiers were never shown.
 
     .venv/bin/python benchmarks/appearance.py [--repeats 3] [--frames 20] [--banks 5]
 """
@@ -33,7 +35,7 @@ from fusiontrack.io.recording import Recording
 from fusiontrack.sim.scenario import load_scenario
 from fusiontrack.sim.simulator import simulate
 from fusiontrack.vision.appearance import AppearanceBank, AppearanceParams, BoostParams
-from fusiontrack.vision.patches import extract_features, patch_fraction, sample_patches
+from fusiontrack.vision.patches import FeatureParams, extract_features, patch_fraction, sample_patches
 
 H, W = 480, 640
 TRAIN = range(40, 100, 2)
@@ -115,8 +117,8 @@ def boxes_of(gt) -> dict[int, np.ndarray]:
     return {int(i): box[j] for j, i in enumerate(gt.ids) if vis[j] > 0.5}
 
 
-def learning_curve(n_banks: int, params: AppearanceParams) -> dict[int, np.ndarray]:
-    """``curve[n]``: (n_banks * 2, 3) box AUC, on-person patch AUC, margin after ``n`` training frames."""
+def crossing() -> tuple[list[np.ndarray], list[np.ndarray], list[dict[int, np.ndarray]]]:
+    """Images, per-pixel labels and visible true boxes of camera 0 in a simulated `crossing` (10 s, seed 0)."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "crossing"
         simulate(load_scenario("crossing").with_overrides(seconds=10, seed=0), out)
@@ -124,12 +126,19 @@ def learning_curve(n_banks: int, params: AppearanceParams) -> dict[int, np.ndarr
             images = [m.bgr() for m in rec.messages(["/camera_0/image"])]
             labels = [m.pixels for m in rec.messages(["/camera_0/labels"])]
             truth = [boxes_of(m) for m in rec.messages(["/ground_truth/camera_0"])]
+    return images, labels, truth
+
+
+def learning_curve(data: tuple, n_banks: int, params: AppearanceParams) -> dict[int, np.ndarray]:
+    """``curve[n]``: (n_banks * 2, 3) box AUC, on-person patch AUC, margin after ``n`` training frames."""
+    images, labels, truth = data
     rng = np.random.default_rng(100)
     held = []
     for k in TEST:
         for tid, box in truth[k].items():
-            p = sample_patches(box, images[k].shape, rng=rng)
-            held.append((tid, extract_features(images[k], p), patch_fraction(labels[k] == tid + 1, p) >= 0.5))
+            p = sample_patches(box, images[k].shape, params.patches, rng=rng)
+            held.append((tid, extract_features(images[k], p, params.features),
+                         patch_fraction(labels[k] == tid + 1, p) >= 0.5))
     curve: dict[int, list] = {n: [] for n in CHECKPOINTS}
     for seed in range(n_banks):
         bank = AppearanceBank(params, rng=seed)
@@ -167,9 +176,13 @@ def main() -> None:
     console.print("train frame = B12 patches of every box + B13 features + one forced B14 update per target; "
                   "B14 update = 3 new depth-3 trees on one frame's batch (~42 positives, ~84 negatives) + the "
                   "reservoir draw; score map = 300 patches in the dilated union of two boxes (B16).")
-    for name, params in (("B14 defaults M = 10, K_keep = 7", AppearanceParams()),
-                         ("M = 20, K_keep = 14", AppearanceParams(boost=BoostParams(n_learners=20, n_keep=14)))):
-        curve = learning_curve(args.banks, params)
+    data = crossing()
+    for name, params in (("B13 mean R, G, B per cell (colour='rgb'), M = 10, K_keep = 7",
+                          AppearanceParams(features=FeatureParams(colour="rgb"))),
+                         ("defaults: (I, r, g) per cell, M = 10, K_keep = 7", AppearanceParams()),
+                         ("(I, r, g) per cell, M = 20, K_keep = 14",
+                          AppearanceParams(boost=BoostParams(n_learners=20, n_keep=14)))):
+        curve = learning_curve(data, args.banks, params)
         t = Table(title=f"learning curve on the simulated crossing, {name} (unseen frames 100-124; mean (min) over "
                         f"{args.banks} banks x 2 people)", header_style="bold")
         for col in ("training frames", "box AUC", "patch AUC (on person)", "margin"):

@@ -194,24 +194,54 @@ def test_vertical_step_edge_puts_its_energy_in_the_zero_bin():
     assert h[2] >= 0.95 * h.sum() > 0  # horizontal edge: bin K/2 (90 degrees)
 
 
+RGB_FEATURES = FeatureParams(colour="rgb")
+
+
+def _colour(bgr: tuple[int, int, int], kappa: float = 5.0) -> np.ndarray:
+    """B13's cell colour ``(I, r, g)`` of a uniform BGR colour, from the definition (κ in grey levels)."""
+    b, g, r = (float(v) for v in bgr)
+    total = r + g + b
+    return np.array([total / 765, (r + kappa) / (total + 3 * kappa), (g + kappa) / (total + 3 * kappa)])
+
+
 def test_uniform_patch_features():
     img = np.full((30, 30, 3), (40, 90, 200), np.uint8)  # BGR
-    f = patch_features(integral_channels(img), np.array([[5, 5]]), S)[0]
-    assert f.shape == (23,) == (FeatureParams().n_features,)
-    np.testing.assert_allclose(f[:12], np.tile([200 / 255, 90 / 255, 40 / 255], 4))  # R, G, B per cell
-    np.testing.assert_allclose(f[12:16], 0.25)  # dominant orientations 1/K
-    np.testing.assert_allclose(f[16:22], 0.0)  # log ratios
-    assert f[22] == 0.0
+    for params, cell in ((RGB_FEATURES, [200 / 255, 90 / 255, 40 / 255]),  # B13's R, G, B per cell
+                         (FeatureParams(), [330 / 765, 205 / 345, 95 / 345])):  # I, (R+5)/(R+G+B+15), (G+5)/(..)
+        f = patch_features(integral_channels(img, params), np.array([[5, 5]]), S, params)[0]
+        assert f.shape == (23,) == (params.n_features,)
+        np.testing.assert_allclose(f[:12], np.tile(cell, 4))
+        np.testing.assert_allclose(f[12:16], 0.25)  # dominant orientations 1/K
+        np.testing.assert_allclose(f[16:22], 0.0)  # log ratios
+        assert f[22] == 0.0
 
 
-def test_rgb_cells_follow_the_2x2_grid():
+def test_colour_cells_follow_the_2x2_grid():
     img = np.zeros((12, 12, 3), np.uint8)
     img[:6, :6] = (0, 0, 255)  # red top-left
     img[:6, 6:] = (255, 0, 0)  # blue top-right
     img[6:, :6] = (0, 255, 0)  # green bottom-left
     img[6:, 6:] = (255, 255, 255)
-    f = patch_features(integral_channels(img), np.array([[0, 0]]), S)[0]
+    f = patch_features(integral_channels(img, RGB_FEATURES), np.array([[0, 0]]), S, RGB_FEATURES)[0]
     np.testing.assert_allclose(f[:12], [1, 0, 0, 0, 0, 1, 0, 1, 0, 1, 1, 1])
+    f = patch_features(integral_channels(img), np.array([[0, 0]]), S)[0]
+    cells = [(0, 0, 255), (255, 0, 0), (0, 255, 0), (255, 255, 255)]
+    np.testing.assert_allclose(f[:12], np.concatenate([_colour(c) for c in cells]))
+    np.testing.assert_allclose(f[[1, 2, 10, 11]], [260 / 270, 5 / 270, 1 / 3, 1 / 3])  # red; white is neutral
+
+
+def test_chromaticity_does_not_change_with_shading():
+    """The same clothing in full light and in shade (every channel x 0.4): r, g stay, I scales (B13 colour)."""
+    rng = np.random.default_rng(0)
+    cloth = rng.uniform(120, 250, (1, 1, 3)) * np.array([0.3, 0.6, 1.0])  # an orange-ish BGR cloth
+    lit = np.repeat(np.repeat(cloth, S, 0), S, 1)
+    img = np.concatenate([lit, 0.4 * lit], axis=1).round().astype(np.uint8)  # lit patch | shaded patch
+    corners = np.array([[0, 0], [S, 0]])
+    f = patch_features(integral_channels(img), corners, S)
+    np.testing.assert_allclose(f[1, 0::3][:4], 0.4 * f[0, 0::3][:4], atol=2 / 255)  # intensity follows the light
+    np.testing.assert_allclose(f[1, :12].reshape(4, 3)[:, 1:], f[0, :12].reshape(4, 3)[:, 1:], atol=0.02)
+    raw = patch_features(integral_channels(img, RGB_FEATURES), corners, S, RGB_FEATURES)
+    assert np.abs(raw[1, :12] - raw[0, :12]).max() > 0.2  # B13's R, G, B all move with the shading
 
 
 def test_symmetry_feature_of_mirror_symmetric_and_one_sided_patterns():
@@ -443,7 +473,7 @@ def test_negatives_come_from_the_l_closest_targets_and_patches_in_other_boxes_ar
     assert bank.is_trained(1)
     neg = bank.classifier(1).reservoir(-1)
     pos = bank.classifier(1).reservoir(1)
-    rgb = (lambda bgr: np.array(bgr[::-1]) / 255)  # noqa: E731
+    rgb = _colour  # the default cell colour (I, r, g) of a BGR colour
     assert len(neg) > 0
     assert np.allclose(pos[:, :3], rgb(RED))
     cells = neg[:, :12].reshape(-1, 4, 3)
@@ -541,6 +571,11 @@ def test_bank_round_trip_through_json_gives_identical_scores_and_learning():
     np.testing.assert_array_equal(light.confidences(f), bank.confidences(f))
     assert len(light.classifier(1).reservoir(1)) == 0
     assert len(json.dumps(light.to_dict())) < len(json.dumps(bank.to_dict())) / 20
+    # a state of the first format (no FeatureParams.colour) learnt B13's R, G, B and is read back so
+    old = bank.to_dict()
+    old["format"] = "fusiontrack.appearance/1"
+    del old["params"]["features"]["colour"]
+    assert AppearanceBank.from_dict(old).params.features.colour == "rgb"
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -582,6 +617,10 @@ def test_bad_input_raises_value_errors_that_name_the_culprit():
         bank.box_scores(img, [10, 10, 50, 50], [7])
     with pytest.raises(ValueError, match="format"):
         AppearanceBank.from_dict({"format": "something else"})
+    with pytest.raises(ValueError, match="colour"):
+        FeatureParams(colour="hsv")
+    with pytest.raises(ValueError, match="chroma_eps"):
+        FeatureParams(chroma_eps=0.0)
     with pytest.raises(ValueError, match="sigma_px"):
         score_map_likelihood(np.zeros((1, 2)), np.ones(1), np.zeros((1, 2)), sigma_px=0.0)
 

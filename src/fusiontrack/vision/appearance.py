@@ -74,7 +74,8 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-_FORMAT = "fusiontrack.appearance/1"
+_FORMAT = "fusiontrack.appearance/2"
+_FORMAT_RGB = "fusiontrack.appearance/1"  # before FeatureParams.colour: its classifiers learnt mean R, G, B
 
 
 def _check_int(owner: str, name: str, value: Any, lo: int, hi: int | None = None) -> None:
@@ -1165,11 +1166,20 @@ class AppearanceBank:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> AppearanceBank:
-        """Inverse of :meth:`to_dict` (``ValueError`` on another format or a malformed state)."""
-        if not isinstance(data, Mapping) or data.get("format") != _FORMAT:
+        """Inverse of :meth:`to_dict` (``ValueError`` on another format or a malformed state).
+
+        A state of the first format (``fusiontrack.appearance/1``, saved before ``FeatureParams.colour``
+        existed) is read with ``colour="rgb"``, the features its classifiers learnt.
+        """
+        if not isinstance(data, Mapping) or data.get("format") not in (_FORMAT, _FORMAT_RGB):
             got = data.get("format") if isinstance(data, Mapping) else type(data).__name__
             raise ValueError(f"appearance state: expected format {_FORMAT!r}, got {got!r}")
-        params = AppearanceParams.from_dict(data["params"])
+        if not isinstance(data.get("params"), Mapping):
+            raise ValueError("appearance state: malformed params (expected a mapping)")
+        raw = dict(data["params"])
+        if data["format"] == _FORMAT_RGB:
+            raw["features"] = {"colour": "rgb", **raw.get("features", {})}
+        params = AppearanceParams.from_dict(raw)
         out = cls(params)
         if data.get("rng") is not None:
             try:

@@ -6,9 +6,12 @@
   is visible. A box narrower than a patch (but at least half as wide) gets patches centred on it across
   that direction; a smaller one gets none. :func:`grid_patches` places patches on a
   regular grid instead (dense score maps, B16).
-* B13 — :func:`patch_features`: per patch a ``d = 23`` vector: the mean R, G, B of each cell of a 2×2
-  grid (12, scaled to [0, 1]) and the Edge Orientation Histogram of Levi & Weiss (2004): K = 4 dominant-
-  orientation features, K(K−1)/2 = 6 log-ratios and one left/right mirror-symmetry feature.
+* B13 — :func:`patch_features`: per patch a ``d = 23`` vector: the colour of each cell of a 2×2 grid (12)
+  and the Edge Orientation Histogram of Levi & Weiss (2004): K = 4 dominant-orientation features,
+  K(K−1)/2 = 6 log-ratios and one left/right mirror-symmetry feature. The colour of a cell is its mean
+  R, G, B written as intensity and chromaticity ``(I, r, g)`` by default (``FeatureParams.colour``), a
+  lossless change of coordinates of B13's mean R, G, B in which a surface's hue does not change with its
+  shading; ``colour="rgb"`` gives B13's literal mean R, G, B in [0, 1].
   :func:`integral_channels` computes the gradients (``cv2.Sobel``) once per image region and the integral
   images (X3) of R, G, B and of the K per-bin gradient magnitudes ``ψ_k``, so any patch costs four
   look-ups per channel and cell, whatever its size.
@@ -106,11 +109,23 @@ class FeatureParams:
         ``τ_G`` in grey levels per pixel (10) [RECON]; weaker gradients count in no bin.
     eps_scale : float
         ``ε = eps_scale · s²`` regularises the ratios (0.01) [RECON].
+    colour : str
+        The colour of each 2×2 cell: ``"chromaticity"`` (default) ``(I, r, g)`` with ``I = (R+G+B)/3`` in [0, 1]
+        and ``r = (R+κ)/(R+G+B+3κ)``, ``g = (G+κ)/(R+G+B+3κ)``; or ``"rgb"``, B13's mean R, G, B in [0, 1].
+        Both carry the same information, but a person's clothing keeps its ``r, g`` as the light falling on
+        it changes with the viewing angle and the body's orientation, while its R, G, B all scale with the
+        shading; axis-aligned CART splits (B14) then learn the clothing, not its lighting [deviation from B13's
+        wording, measured in tests/test_vision_appearance_sim.py].
+    chroma_eps : float
+        ``κ`` in grey levels (0–255, 5): pulls the chromaticity of dark cells, dominated by sensor noise,
+        towards neutral grey [RECON].
     """
 
     n_bins: int = 4
     grad_threshold: float = 10.0
     eps_scale: float = 0.01
+    colour: str = "chromaticity"
+    chroma_eps: float = 5.0
 
     def __post_init__(self) -> None:
         k = self.n_bins
@@ -120,6 +135,11 @@ class FeatureParams:
             raise ValueError(f"FeatureParams.grad_threshold: expected a finite value >= 0, got {self.grad_threshold!r}")
         if not (np.isfinite(self.eps_scale) and self.eps_scale > 0):
             raise ValueError(f"FeatureParams.eps_scale: expected a finite value > 0, got {self.eps_scale!r}")
+        if self.colour not in ("chromaticity", "rgb"):
+            raise ValueError(f"FeatureParams.colour: expected 'chromaticity' or 'rgb', got {self.colour!r}")
+        if not (np.isfinite(self.chroma_eps) and self.chroma_eps > 0):
+            raise ValueError(f"FeatureParams.chroma_eps: expected a finite value > 0 grey levels, got "
+                             f"{self.chroma_eps!r}")
 
     @property
     def n_features(self) -> int:
@@ -485,8 +505,9 @@ def patch_features(integrals: PatchIntegrals, corners_px: np.ndarray, size_px: i
     Returns
     -------
     (n, d) float64
-        ``[R, G, B of cells TL, TR, BL, BR (12, in [0, 1])`` | dominant orientations ``(E_k+ε)/(ΣE+Kε)`` (K) |
-        ``log((E_a+ε)/(E_b+ε))`` for ``a < b`` (K(K−1)/2) | symmetry (1)]``; d = 23 for K = 4.
+        ``[colour of cells TL, TR, BL, BR (12: I, r, g each, or R, G, B in [0, 1] with colour="rgb")`` |
+        dominant orientations ``(E_k+ε)/(ΣE+Kε)`` (K) | ``log((E_a+ε)/(E_b+ε))`` for ``a < b`` (K(K−1)/2) |
+        symmetry (1)]``; d = 23 for K = 4.
     """
     p = params or FeatureParams()
     if p.n_bins != integrals.n_bins:
@@ -497,7 +518,12 @@ def patch_features(integrals: PatchIntegrals, corners_px: np.ndarray, size_px: i
     k, n = p.n_bins, len(c)
     cells = _cell_sums(integrals, c, size_px)  # (n, 4, 3+K)
     area = (size_px // 2) ** 2
-    rgb = (cells[:, :, :3] / (255.0 * area)).reshape(n, 12)
+    colour = cells[:, :, :3] / (255.0 * area)  # (n, 4, 3) mean R, G, B in [0, 1]
+    if p.colour == "chromaticity":
+        kappa = p.chroma_eps / 255.0
+        total = colour.sum(axis=2, keepdims=True)
+        colour = np.concatenate([total / 3.0, (colour[:, :, :2] + kappa) / (total + 3.0 * kappa)], axis=2)
+    colour = colour.reshape(n, 12)
     eoh = cells[:, :, 3:]
     e = eoh.sum(axis=1)  # (n, K) whole patch
     eps = p.eps_scale * size_px**2
@@ -508,7 +534,7 @@ def patch_features(integrals: PatchIntegrals, corners_px: np.ndarray, size_px: i
     left = eoh[:, 0] + eoh[:, 2]
     right = (eoh[:, 1] + eoh[:, 3])[:, (k - np.arange(k)) % k]
     sym = np.abs(left - right).sum(axis=1) / ((left + right).sum(axis=1) + eps)
-    return np.concatenate([rgb, dominant, ratios, sym[:, None]], axis=1)
+    return np.concatenate([colour, dominant, ratios, sym[:, None]], axis=1)
 
 
 def patch_fraction(mask: np.ndarray, patches: Patches) -> np.ndarray:
