@@ -660,16 +660,30 @@ def eval_(
                      ] = None,
     time_source: Annotated[str, typer.Option("--time", help="Ground-truth times: header or log.")] = "header",
     output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the metrics as JSON here.")] = None,
+    camera: Annotated[str | None, typer.Option(help="Score image boxes against this camera's truth boxes "
+                                               "(/ground_truth/CAMERA of a simulated recording) by IoU >= 0.5; "
+                                               "default for the folder of `track --pipeline people-camera`.")
+                      ] = None,
 ) -> None:
     """Score tracks against ground truth: MOTA, MOTP, IDF1, ID switches, HOTA, FP, FN, MT/ML (TrackEval).
 
     Floor-plane tracks are matched within --threshold metres; MOTChallenge box files by IoU >= 0.5.
+    Image boxes of one camera (the output of `track --pipeline people-camera`: its folder, tracks.jsonl or
+    tracks_mot.txt) are scored against a simulated recording's per-camera truth boxes by IoU >= 0.5 (people
+    less than half visible are distractors), with --camera or when the folder's tracks are of one camera.
     For a simulated recording, situation detection (seed 001 Table II) is scored too.
     """
     from .eval import evaluate_floor, evaluate_mot_files, metrics_table, situation_accuracy, situation_table
 
     result: dict[str, Any] = {}
-    if tracks.suffix == ".txt":
+    image = _eval_image_boxes(tracks, ground_truth, camera, time_source)
+    if image is not None:
+        metrics, cam = image
+        console.print(metrics_table({f"{tracks.name} vs /ground_truth/{cam}": metrics},
+                                    title="image boxes, match at IoU >= 0.5"))
+        result["camera"] = cam
+        result["metrics"] = metrics.to_dict()
+    elif tracks.suffix == ".txt":
         metrics = evaluate_mot_files(ground_truth, tracks)
         console.print(metrics_table({tracks.name: metrics}))
         result["metrics"] = metrics.to_dict()
@@ -692,6 +706,53 @@ def eval_(
         output.parent.mkdir(parents=True, exist_ok=True)
         output.write_text(json.dumps(result, indent=2, default=float))
         console.print(f"metrics: {output}")
+
+
+def _eval_image_boxes(tracks: Path, recording: Path, camera: str | None, time_source: str) -> tuple[Any, str] | None:
+    """``eval`` of image boxes against ``/ground_truth/<camera>``; None when no camera is given and ``tracks`` is not
+    a people-camera output of one camera (that has tracks_mot.txt beside it)."""
+    from .errors import RecordingError
+    from .eval.mot import evaluate_camera_boxes
+    from .io.recording import Recording
+    from .io.tracks import read_jsonl, read_mot
+    from .types import CameraInfo, GroundTruth, TrackState
+
+    folder = tracks if tracks.is_dir() else tracks.parent
+    if camera is None and (recording.suffix == ".txt" or not (folder / "tracks_mot.txt").is_file()):
+        return None  # a MOTChallenge gt file, or not a people-camera output
+    source = tracks
+    if tracks.is_dir():
+        source = tracks / "tracks.jsonl" if (tracks / "tracks.jsonl").is_file() else tracks / "tracks_mot.txt"
+    if source.suffix not in (".jsonl", ".txt") or not source.is_file():
+        if camera is None:
+            return None
+        raise ConfigError(f"--camera: {tracks} has no image boxes (expected a people-camera output folder, its "
+                          "tracks.jsonl or tracks_mot.txt, or a MOTChallenge result file)")
+    states = ([r for r in read_jsonl(source) if isinstance(r, TrackState) and r.box_px is not None]
+              if source.suffix == ".jsonl" else None)
+    auto = camera is None
+    if camera is None:  # auto: the one camera of the states, if the recording has its truth boxes
+        cams = {s.camera for s in states or []} - {""}
+        if len(cams) != 1:
+            return None
+        camera = cams.pop()
+    camera = camera.strip("/").removeprefix("ground_truth/")
+    topic = f"/ground_truth/{camera}"
+    with Recording(recording) as rec:
+        topics = rec.topics()
+        if topic not in topics:
+            if auto:
+                return None
+            found = sorted(t for t in topics if t.startswith("/ground_truth/"))
+            raise RecordingError(f"{recording}: no truth boxes {topic} for --camera {camera} (found "
+                                 f"{', '.join(found) or 'none'})")
+        truth = [m for m in rec.messages([topic], time_source=time_source) if isinstance(m, GroundTruth)]
+        info_topic = f"/{camera}/camera_info"
+        info = next((m for m in rec.messages([info_topic]) if isinstance(m, CameraInfo)), None) \
+            if info_topic in topics else None
+    size = (info.width, info.height) if info is not None else (None, None)
+    res: Any = states if states is not None else read_mot(source)
+    return evaluate_camera_boxes(truth, res, *size, name=f"{source} vs {topic}"), camera
 
 
 def _bounds_of(recording: Path) -> Any:

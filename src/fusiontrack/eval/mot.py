@@ -61,6 +61,15 @@ Image boxes (:func:`evaluate_boxes`, :func:`evaluate_mot_files`)
     ``preprocess=None`` picks it from the ground-truth layout: on for 9-column files (MOT16/17/20),
     off otherwise.
 
+Image boxes of one simulated camera (:func:`evaluate_camera_boxes`)
+    The simulator's per-camera truth (``/ground_truth/<camera>``: ``box_px`` and ``visibility`` per agent per
+    image) becomes MOT16-style ground truth through :func:`fusiontrack.vision.camera_truth_boxes` (boxes
+    clipped to the image; a person at least half visible is a pedestrian, a less visible one a distractor),
+    each truth record being one frame ``1 .. n``. Agents of other classes (cars on a road) are left out, so
+    a track on one is a false positive. Track states (``box_px``) go to the truth frame nearest in time, within
+    half the median truth period, as in the floor plane; then :func:`evaluate_boxes` with ``preprocess=True``.
+    This is the scoring of ``benchmarks/camera_people.py``.
+
 Compatibility: TrackEval 1.3.0 runs unchanged on numpy 2.x (it no longer uses the removed
 ``np.float``/``np.int`` aliases), so no shim is installed. Metric configs are built with
 ``PRINT_CONFIG=False``, so nothing is printed; TrackEval is imported on first use (~0.7 s).
@@ -92,6 +101,7 @@ __all__ = [
     "Metrics",
     "combine_metrics",
     "evaluate_boxes",
+    "evaluate_camera_boxes",
     "evaluate_floor",
     "evaluate_mot_files",
     "floor_similarity",
@@ -368,6 +378,28 @@ def _class_filter(classes: Iterable[str] | None) -> frozenset[str] | None:
                               f"{tuple(classes)!r}") from err
 
 
+def _time_tolerance(gt_t: np.ndarray, time_tolerance_ns: int | None) -> int:
+    if time_tolerance_ns is None:
+        return int(np.median(np.diff(gt_t))) // 2 if gt_t.size > 1 else 0
+    if isinstance(time_tolerance_ns, bool) or not isinstance(time_tolerance_ns, int | np.integer) \
+            or time_tolerance_ns < 0:
+        raise EvaluationError(f"time_tolerance_ns: expected an integer >= 0 or None, got {time_tolerance_ns!r}")
+    return int(time_tolerance_ns)
+
+
+def _nearest_frame(gt_t: np.ndarray, st_t: np.ndarray, tolerance_ns: int) -> tuple[np.ndarray, np.ndarray,
+                                                                                   np.ndarray]:
+    """Index of the nearest of the sorted frame times ``gt_t`` for each time ``st_t`` (the earlier on a tie),
+    the offset (ns), and whether it is within ``tolerance_ns``."""
+    n_t = gt_t.size
+    after = np.searchsorted(gt_t, st_t)
+    lo, hi = np.clip(after - 1, 0, n_t - 1), np.clip(after, 0, n_t - 1)
+    dt_lo, dt_hi = np.abs(st_t - gt_t[lo]), np.abs(gt_t[hi] - st_t)
+    frame = np.where(dt_hi < dt_lo, hi, lo)
+    dt = np.minimum(dt_lo, dt_hi)
+    return frame, dt, dt <= tolerance_ns
+
+
 def _floor_sequence(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Track], threshold_m: float,
                     classes: frozenset[str] | None, time_tolerance_ns: int | None, name: str) -> _Sequence:
     frames = sorted(gt, key=lambda f: f.t_ns)
@@ -377,11 +409,7 @@ def _floor_sequence(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Tra
     if np.any(np.diff(gt_t) == 0):
         t_dup = int(gt_t[1:][np.diff(gt_t) == 0][0])
         raise EvaluationError(f"gt: two GroundTruth frames at t_ns={t_dup}")
-    if time_tolerance_ns is None:
-        time_tolerance_ns = int(np.median(np.diff(gt_t))) // 2 if gt_t.size > 1 else 0
-    elif isinstance(time_tolerance_ns, bool) or not isinstance(time_tolerance_ns, int | np.integer) \
-            or time_tolerance_ns < 0:
-        raise EvaluationError(f"time_tolerance_ns: expected an integer >= 0 or None, got {time_tolerance_ns!r}")
+    time_tolerance_ns = _time_tolerance(gt_t, time_tolerance_ns)
     n_t = gt_t.size
 
     # ground truth, per frame, sorted by id
@@ -403,12 +431,7 @@ def _floor_sequence(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Tra
         if np.any(pair[1] > 1):
             t_dup, id_dup = pair[0][np.argmax(pair[1] > 1)].tolist()
             raise EvaluationError(f"tracks: two states of track {id_dup} at t_ns={t_dup}")
-    after = np.searchsorted(gt_t, st_t)
-    lo, hi = np.clip(after - 1, 0, n_t - 1), np.clip(after, 0, n_t - 1)
-    dt_lo, dt_hi = np.abs(st_t - gt_t[lo]), np.abs(gt_t[hi] - st_t)
-    frame = np.where(dt_hi < dt_lo, hi, lo)
-    dt = np.minimum(dt_lo, dt_hi)
-    inside = dt <= time_tolerance_ns
+    frame, dt, inside = _nearest_frame(gt_t, st_t, time_tolerance_ns)
     frame, dt, st_t, st_id, st_xy = frame[inside], dt[inside], st_t[inside], st_id[inside], st_xy[inside]
     order = np.lexsort((st_t, dt, st_id, frame))  # by frame, id, then nearest (earlier on a tie)
     frame, st_id, st_xy = frame[order], st_id[order], st_xy[order]
@@ -559,6 +582,79 @@ def evaluate_boxes(gt: MotBoxes, res: MotBoxes, *, preprocess: bool | None = Non
         raise EvaluationError(f"{name}: frames are 1-based, found frame {first}")
     seq = _box_sequence(gt, res, bool(preprocess), distractor_classes, int(n_frames), name)
     return _evaluate(seq, float(iou_threshold))
+
+
+def evaluate_camera_boxes(truth: Sequence[GroundTruth], tracks: Iterable[TrackState | Track] | MotBoxes,
+                          width: float | None, height: float | None, *, classes: Iterable[str] | None = ("person",),
+                          min_visibility: float = 0.5, iou_threshold: float = 0.5,
+                          time_tolerance_ns: int | None = None, name: str = "camera") -> Metrics:
+    """Metrics of image tracks against a simulated camera's truth boxes (see the module docstring).
+
+    Parameters
+    ----------
+    truth : sequence of GroundTruth
+        The camera's truth records (``/ground_truth/<camera>``), one per image, with attributes ``box_px``
+        (n, 4) and ``visibility`` (n,). Record ``k`` in time order is frame ``k + 1``.
+    tracks : iterable of TrackState or Track, or MotBoxes
+        States with ``box_px`` in that camera's image (states without a box are skipped), or MOTChallenge
+        rows already numbered by those frames (e.g. ``tracks_mot.txt`` of ``fusiontrack track``).
+    width, height : float or None
+        Image size (px); truth boxes are clipped to it (``None``: not clipped).
+    classes : iterable of str or None
+        Truth classes kept (``None`` = all).
+    min_visibility : float
+        Less visible people are distractors.
+    iou_threshold : float
+        CLEAR and Identity match threshold.
+    time_tolerance_ns : int or None
+        Largest offset between a state and its frame; ``None`` = half the median truth period.
+    name : str
+        Sequence name used in error messages.
+
+    Raises
+    ------
+    EvaluationError
+        No truth records, two at one time, two states of one track in one frame, a bad threshold, or MOT
+        rows outside ``1 .. len(truth)``.
+    """
+    from ..vision.people import camera_truth_boxes  # vision pulls in OpenCV: only when asked
+
+    frames = sorted(truth, key=lambda f: f.t_ns)
+    if not frames:
+        raise EvaluationError(f"{name}: expected at least one ground-truth record of the camera")
+    gt_t = np.array([f.t_ns for f in frames], dtype=np.int64)
+    if np.any(np.diff(gt_t) == 0):
+        raise EvaluationError(f"{name}: two ground-truth records at t_ns={int(gt_t[1:][np.diff(gt_t) == 0][0])}")
+    size = [np.inf if x is None else x for x in (width, height)]
+    if not all(isinstance(x, int | float | np.number) and x > 0 for x in size):
+        raise EvaluationError(f"{name}: expected a positive image size, got {width!r} x {height!r}")
+    gt = camera_truth_boxes(frames, size[0], size[1], min_visibility=min_visibility)  # type: ignore[arg-type]
+    keep_cls = _class_filter(classes)
+    if keep_cls is not None:
+        ids = np.concatenate([f.ids for f in frames]).astype(np.int64)
+        cls = np.concatenate([np.array(f.classes if len(f.classes) == len(f) else [""] * len(f), dtype=object)
+                              for f in frames]) if ids.size else np.zeros(0, object)
+        kept_ids = np.unique(ids[np.isin(cls, list(keep_cls))])
+        sel = np.isin(gt.id, kept_ids)
+        gt = MotBoxes(gt.frame[sel], gt.id[sel], gt.boxes_ltwh[sel], gt.conf[sel], gt.extra[sel])
+    if isinstance(tracks, MotBoxes):
+        res = tracks
+        if len(res) and (res.frame.min() < 1 or res.frame.max() > len(frames)):
+            raise EvaluationError(f"{name}: track rows in frames {int(res.frame.min())}..{int(res.frame.max())}, "
+                                  f"expected 1..{len(frames)} (one per ground-truth record)")
+    else:
+        states = [s for s in flatten_states(tracks) if s.box_px is not None]
+        st_t = np.array([s.t_ns for s in states], dtype=np.int64)
+        frame, _, inside = _nearest_frame(gt_t, st_t, _time_tolerance(gt_t, time_tolerance_ns))
+        if not inside.all():
+            logger.debug("%s: %d states farther than the tolerance from every frame are not evaluated", name,
+                         int((~inside).sum()))
+        box = np.array([s.box_px for s in states], dtype=np.float64).reshape(-1, 4)[inside]
+        res = MotBoxes(frame[inside].astype(np.int64) + 1,
+                       np.array([s.track_id for s in states], dtype=np.int64)[inside],
+                       np.column_stack([box[:, :2], box[:, 2:] - box[:, :2]]), np.ones(int(inside.sum())),
+                       np.zeros((int(inside.sum()), 0)))
+    return evaluate_boxes(gt, res, preprocess=True, iou_threshold=iou_threshold, n_frames=len(frames), name=name)
 
 
 def _seq_length(gt_path: Path) -> int | None:
