@@ -2,11 +2,20 @@
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 
-from fusiontrack.vision import BlobParams, blob_histograms, extract_blobs
-from fusiontrack.vision.blob_tracker import BlobTracker, BlobTrackerParams, NodeLabel, box_gaps
+from fusiontrack.geometry import PinholeCamera
+from fusiontrack.vision import BlobParams, Blobs, blob_histograms, extract_blobs
+from fusiontrack.vision.blob_tracker import (
+    BlobTracker,
+    BlobTrackerParams,
+    NodeLabel,
+    box_gaps,
+    fit_person_area,
+)
 
 H, W = 240, 320
 PW, PH = 20, 60  # a person's box, px
@@ -165,3 +174,154 @@ def test_bad_input():
         BlobTrackerParams(tau_ov=-1.0)
     empty = extract_blobs(np.zeros((H, W), bool))
     assert BlobTracker().step(empty) == []
+
+
+# -- A5 §3-4 size prior: A_p(v_bottom), n̂ = area / A_p, groups of unknown member count ----------------------
+
+
+def sized_frame(people: list[tuple[float, float, int, tuple[int, int, int]]]) -> np.ndarray:
+    """Black frame with a filled box per person ``(u_min, v_bottom, width, colour)``, height ``v_bottom // 2``.
+
+    A single person (width ``PW``) then has the box-area law ``A_p(v) = PW * (v // 2) ≈ 10 v`` px².
+    """
+    f = np.zeros((H, W, 3), np.uint8)
+    for u, vb, w, colour in people:
+        u0, vb = round(u), round(vb)
+        f[vb - vb // 2:vb, u0:u0 + w] = colour
+    return f
+
+
+LEARN = [sized_frame([(20, 100 + 2 * k, PW, GREEN)]) for k in range(62)]  # a walker coming nearer: rows 100..222
+
+
+def run_on(tracker: BlobTracker, frames: list[np.ndarray], start: int = 0):
+    outputs = []
+    for k, f in enumerate(frames, start=start):
+        blobs = extract_blobs(f.any(axis=2))
+        outputs.append(tracker.step(blobs, blob_histograms(f, blobs), t_ns=k * 100_000_000))
+    return outputs
+
+
+SIZE_RULE = BlobTrackerParams(group_n_hat=1.7)  # A5 §4's value (off by default)
+
+
+@pytest.fixture(scope="module")
+def learnt() -> BlobTracker:
+    tracker = BlobTracker(SIZE_RULE)
+    run_on(tracker, LEARN)
+    return tracker
+
+
+def test_fit_person_area_recovers_a_linear_law_robustly():
+    rng = np.random.default_rng(3)
+    v = rng.uniform(80, 230, 400)
+    a = 12.0 * v - 300.0 + rng.normal(0, 20, v.size)
+    bad = rng.random(v.size) < 0.2  # a fifth of the "single" samples are two people or a person and shadow
+    a[bad] *= 2.0
+    law = fit_person_area(v, a)
+    assert law is not None
+    assert abs(law.slope - 12.0) < 0.4
+    assert abs(law.intercept + 300.0) < 60
+    np.testing.assert_allclose(law(np.array([100.0, 200.0])), [900.0, 2100.0], rtol=0.03)
+    assert np.isnan(law(np.array([10.0, 400.0]))).all()  # far outside the rows seen: unknown
+    assert fit_person_area(v[:20], a[:20]) is None  # too few
+    assert fit_person_area(np.full(100, 150.0) + rng.normal(0, 3, 100), np.full(100, 1500.0)) is None  # one row
+    nan_v = v.copy()
+    nan_v[::2] = np.nan
+    assert fit_person_area(nan_v, a) is not None  # NaN samples are ignored
+
+
+def test_tracker_learns_the_area_law_of_single_walkers(learnt):
+    law = learnt.area_law
+    assert law is not None
+    assert abs(law.slope - PW / 2) < 0.3  # the rendering's law: A = PW * (v // 2)
+    v = np.array([120.0, 160.0, 200.0])
+    np.testing.assert_allclose(learnt.expected_area(v), PW * (v // 2), rtol=0.03)
+    np.testing.assert_allclose(learnt.n_hat(np.array([[0, 80, 40, 160]])), [2.0], rtol=0.03)
+    # before enough samples spread over rows: no prior, no size rule
+    fresh = BlobTracker()
+    run_on(fresh, LEARN[:30])
+    assert fresh.area_law is None
+    assert np.isnan(fresh.expected_area(np.array([150.0]))).all()
+
+
+def test_blob_twice_a_person_entering_is_a_group_of_unknown_count(learnt):
+    tracker = copy.deepcopy(learnt)
+    frames = [sized_frame([(120, 160, 2 * PW, RED), (240, 160, PW, BLUE)]) for _ in range(8)]
+    out = run_on(tracker, frames, start=len(LEARN))[-1]
+    by_u = sorted(out, key=lambda o: o.box_px[0])
+    wide, single = by_u[-2], by_u[-1]
+    np.testing.assert_allclose(wide.box_px, [120, 80, 160, 160])
+    assert (wide.in_group, wide.count_known, wide.group_size) == (True, False, 2)
+    assert wide.group_id >= 0
+    assert (single.in_group, single.count_known, single.group_size) == (False, True, 1)
+    labels = tracker.node_labels()
+    assert labels[wide.group_id][0] == str(NodeLabel.GROUP)
+    # without the rule (the default) the same blob is one object
+    off = BlobTracker()
+    run_on(off, LEARN)
+    out = run_on(off, frames, start=len(LEARN))[-1]
+    assert not any(o.in_group for o in out)
+
+
+def test_group_entering_as_one_blob_and_diverging_gives_two_objects(learnt):
+    tracker = copy.deepcopy(learnt)
+    frames = []
+    for k in range(45):  # side by side (one blob) for 15 frames, then apart 2 px/frame each way
+        d = max(0, k - 15) * 2
+        frames.append(sized_frame([(150 - d, 160, PW, RED), (150 + PW + d, 160, PW, BLUE)]))
+    outputs = run_on(tracker, frames, start=len(LEARN))
+    during = outputs[10]
+    (group,) = [o for o in during if o.box_px[0] > 100]
+    assert (group.in_group, group.count_known, group.group_size) == (True, False, 2)
+    last = [o for o in outputs[-1] if o.box_px[0] > 60]
+    assert len(last) == 2
+    assert all(not o.in_group and o.count_known and o.group_size == 1 for o in last)
+    assert len({o.object_id for o in last} | {group.object_id}) == 3  # two new ids; the group's id is gone
+    np.testing.assert_allclose(sorted(o.box_px[0] for o in last), [150 - 58, 150 + PW + 58], atol=1)
+
+
+def test_split_child_still_twice_a_person_stays_a_group(learnt):
+    tracker = copy.deepcopy(learnt)
+    frames = []
+    for k in range(45):  # three abreast; the left one walks off, the other two stay together
+        d = max(0, k - 15) * 3
+        frames.append(sized_frame([(120 - d, 160, PW, GREEN), (120 + PW, 160, PW, RED),
+                                   (120 + 2 * PW, 160, PW, BLUE)]))
+    outputs = run_on(tracker, frames, start=len(LEARN))
+    (trio,) = [o for o in outputs[10] if o.box_px[0] > 100]
+    assert (trio.in_group, trio.count_known, trio.group_size) == (True, False, 3)
+    last = sorted((o for o in outputs[-1] if o.box_px[2] > 45), key=lambda o: o.box_px[0])
+    assert len(last) == 2
+    alone, pair = last
+    assert (alone.in_group, alone.count_known, alone.group_size) == (False, True, 1)
+    assert (pair.in_group, pair.count_known, pair.group_size) == (True, False, 2)
+    np.testing.assert_allclose(pair.box_px, [120 + PW, 80, 120 + 3 * PW, 160])
+
+
+def test_camera_gives_an_a_priori_person_area():
+    cam = PinholeCamera.from_pose([0.0, 0.0, 3.0], 0.0, np.radians(20), fx=300, fy=300, width=W, height=H)
+    tracker = BlobTracker(SIZE_RULE, camera=cam)
+    feet = np.array([[4.0, 0.0], [6.0, 0.0], [9.0, 0.0]])  # in front of the camera, on its central column
+    box = cam.person_box(feet, 1.72, 0.40)
+    area = (box[:, 2] - box[:, 0]) * (box[:, 3] - box[:, 1])
+    np.testing.assert_allclose(tracker.expected_area(box[:, 3]), area, rtol=0.02)
+    assert np.isnan(tracker.expected_area(np.array([10.0]))).all()  # above the horizon: no floor there
+    # a blob twice that wide appearing at once is a group, before anything was learnt
+    b = box[1]
+    wide = np.array([[b[0] - (b[2] - b[0]) / 2, b[1], b[2] + (b[2] - b[0]) / 2, b[3]]])
+    blobs = Blobs(wide, (wide[:, :2] + wide[:, 2:]) / 2, np.array([1000]), np.array([1], np.int32),
+                  np.zeros((H, W), np.int32))
+    for k in range(4):
+        out = tracker.step(blobs, t_ns=k * 100_000_000)
+    assert len(out) == 1
+    assert (out[0].in_group, out[0].count_known, out[0].group_size) == (True, False, 2)
+
+
+def test_size_rule_params_checked():
+    with pytest.raises(ValueError, match="group_n_hat"):
+        BlobTrackerParams(group_n_hat=-1.0)
+    with pytest.raises(ValueError, match="person_height_m"):
+        BlobTrackerParams(person_height_m=0.0)
+    with pytest.raises(ValueError, match="differ"):
+        fit_person_area(np.ones(3), np.ones(4))

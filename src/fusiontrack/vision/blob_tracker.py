@@ -19,6 +19,20 @@ Framework of Bose, Wang & Grimson (CVPR 2007) in the online form of Choi et al. 
    of nodes with two or more objects is a *group* whose members are the union.
 5. **Output.** One :class:`TrackedObject` per object: its own box, or the group's box with ``in_group``.
 
+Size prior (A5 §3-4): the expected box area of one person ``A_p(v_bottom)`` is a straight line of area against
+bottom row, fitted robustly (Theil–Sen) to confirmed single objects once ``size_samples`` of them spread over
+at least ``size_spread_px`` rows (:func:`fit_person_area`); with a calibrated camera an a-priori ``A_p`` (the
+projected box of a ``person_height_m`` person) is used wherever the learnt line is not yet valid. With
+``n̂ = area / A_p``: a new node with ``n̂ >= group_n_hat`` is a group of an unknown number of people, and so is
+each diverging child of a split with ``n̂ >= group_n_hat``. Such a group carries a *placeholder* object id
+(it stands for two or more people); it is reported with ``in_group``, ``count_known = False`` and
+``group_size`` from ``n̂``. A placeholder that later turns out to be one person (a split child, or a group that
+stays one person's size for ``W`` frames) becomes an ordinary object under the same id.
+The rule is off by default (``group_n_hat = 0``; A5's value is 1.7): on the simulated ``groups`` and ``crowd``
+(``benchmarks/camera_people.py``, 3 seeds, A5's objects alone) it took MOTA from 35.4 / 36.4 % to 34.5 / 34.6 %
+(IDF1 51.8 / 51.7 → 50.9 / 49.5): most blobs it marks are two people one behind the other, whose box as a
+single object still matched one of them at IoU >= 0.5. The learnt ``A_p`` is always kept (``group_collapse``).
+
 Blobs that appear together within ``d_frag`` of each other are born as a pending split of one new object
 (a person first seen in two pieces keeps one id). A new object is reported once its node has been seen
 ``n_confirm`` frames. Without colour histograms a group's members cannot be told apart at a split; they then
@@ -35,12 +49,15 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+from scipy.stats import theilslopes
 
+from ..geometry import PinholeCamera
 from ..tracking.association import hungarian
 from ..tracking.kalman import cv_matrices, predict, update
 from .blobs import Blobs
 
-__all__ = ["BlobEvent", "BlobTracker", "BlobTrackerParams", "NodeLabel", "TrackedObject", "box_gaps"]
+__all__ = ["AreaLaw", "BlobEvent", "BlobTracker", "BlobTrackerParams", "NodeLabel", "TrackedObject", "box_gaps",
+           "fit_person_area"]
 
 log = logging.getLogger(__name__)
 
@@ -91,6 +108,14 @@ class BlobTrackerParams:
     size_samples : int
         Confirmed single objects (frames) needed before ``A_p``, a straight-line fit of area against bottom
         row, is used (50).
+    size_spread_px : float
+        Least spread (5th to 95th percentile) of their bottom rows before the line is used (30 px) [RECON].
+    group_n_hat : float
+        A5 §4: a new node, or a diverging child of a split, with ``n̂ = area / A_p >= group_n_hat`` is a group
+        of unknown member count (A5's value is 1.7; default 0 = off: on the simulated ``groups`` and ``crowd``
+        it lowers the MOTA of A5's single objects, see the module docstring).
+    person_height_m, person_width_ratio : float
+        The person of the a-priori ``A_p`` from a calibrated camera (1.72 m; width 0.40 of the height, B11).
     """
 
     tau_ov: float = 0.1
@@ -108,6 +133,10 @@ class BlobTrackerParams:
     hist_rate: float = 0.1
     group_collapse: float = 1.3
     size_samples: int = 50
+    size_spread_px: float = 30.0
+    group_n_hat: float = 0.0
+    person_height_m: float = 1.72
+    person_width_ratio: float = 0.40
 
     def __post_init__(self) -> None:
         for name in ("n_coast", "window", "n_confirm"):
@@ -115,13 +144,18 @@ class BlobTrackerParams:
             if isinstance(v, bool) or not isinstance(v, int) or v < (2 if name == "window" else 0):
                 raise ValueError(f"BlobTrackerParams.{name}: expected an integer >= {2 if name == 'window' else 0}, "
                                  f"got {v!r}")
-        for name in ("tau_ov", "d_a_px", "d_frag_px", "sigma_coh_px", "q_px2", "r_px2", "frame_dt_s"):
+        for name in ("tau_ov", "d_a_px", "d_frag_px", "sigma_coh_px", "q_px2", "r_px2", "frame_dt_s",
+                     "size_spread_px", "group_n_hat"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise ValueError(f"BlobTrackerParams.{name}: expected a finite value >= 0, got {v!r}")
         if not (np.isfinite(self.group_collapse) and self.group_collapse >= 0):
             raise ValueError(f"BlobTrackerParams.group_collapse: expected a finite value >= 0, got "
                              f"{self.group_collapse!r}")
+        for name in ("person_height_m", "person_width_ratio"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"BlobTrackerParams.{name}: expected a finite value > 0, got {v!r}")
         if isinstance(self.size_samples, bool) or not isinstance(self.size_samples, int) or self.size_samples < 2:
             raise ValueError(f"BlobTrackerParams.size_samples: expected an integer >= 2, got {self.size_samples!r}")
         for name in ("max_colour_cost", "size_rate", "hist_rate"):
@@ -146,6 +180,12 @@ class TrackedObject:
         Node id of the group (-1 when alone).
     missed : int
         Frames since its blob(s) were last seen (0 = seen now; coasting up to ``n_coast``).
+    group_size : int
+        People in the box: 1 alone, the member count of a group, or for a group of unknown member count
+        its estimate ``max(round(n̂), members + 1)`` (at least 2).
+    count_known : bool
+        False for a group of unknown member count (A5 §4): ``object_id`` may then stand for several people,
+        and the group's other members have no record.
     """
 
     object_id: int
@@ -153,6 +193,8 @@ class TrackedObject:
     in_group: bool = False
     group_id: int = -1
     missed: int = 0
+    group_size: int = 1
+    count_known: bool = True
 
     def __post_init__(self) -> None:
         box = np.array(self.box_px, dtype=np.float64).reshape(4)
@@ -210,6 +252,65 @@ def box_gaps(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.hypot(dx, dy)
 
 
+@dataclass(frozen=True, slots=True)
+class AreaLaw:
+    """A5 §3's ``A_p(v) = intercept + slope · v`` (px²), valid for bottom rows ``v_lo <= v <= v_hi``."""
+
+    slope: float
+    intercept: float
+    v_lo: float
+    v_hi: float
+
+    def __call__(self, v_bottom_px: np.ndarray) -> np.ndarray:
+        """``A_p`` at bottom rows ``v`` (any shape); NaN outside ``[v_lo, v_hi]`` or where the line is <= 0."""
+        v = np.asarray(v_bottom_px, np.float64)
+        a = self.intercept + self.slope * v
+        return np.where((v >= self.v_lo) & (v <= self.v_hi) & (a > 0), a, np.nan)
+
+
+def fit_person_area(v_bottom_px: np.ndarray, area_px2: np.ndarray, *, min_samples: int = 50,
+                    min_spread_px: float = 30.0, max_fit: int = 300) -> AreaLaw | None:
+    """Robust straight line of single-person box area against bottom row (Theil–Sen), or None if too few.
+
+    Parameters
+    ----------
+    v_bottom_px, area_px2 : (n,) float
+        Bottom rows and box areas of confirmed single objects (non-finite pairs are ignored).
+    min_samples : int
+        Fewer finite samples give None.
+    min_spread_px : float
+        Rows whose 5th-95th percentile range is narrower give None (the slope is not determined).
+    max_fit : int
+        At most this many samples, evenly spaced, enter the O(n²) Theil–Sen fit.
+
+    Returns
+    -------
+    AreaLaw or None
+        Valid over the 5th-95th percentile band of the rows widened by a quarter of its width each side.
+    """
+    v = np.asarray(v_bottom_px, np.float64).ravel()
+    a = np.asarray(area_px2, np.float64).ravel()
+    if v.shape != a.shape:
+        raise ValueError(f"fit_person_area: v_bottom_px {v.shape} and area_px2 {a.shape} differ")
+    ok = np.isfinite(v) & np.isfinite(a)
+    v, a = v[ok], a[ok]
+    if v.size < max(min_samples, 2):
+        return None
+    lo, hi = np.percentile(v, [5.0, 95.0])
+    if hi - lo < min_spread_px or hi - lo <= 0:
+        return None
+    if v.size > max_fit:
+        keep = np.linspace(0, v.size - 1, max_fit).round().astype(np.int64)
+        v, a = v[keep], a[keep]
+    slope, intercept, _, _ = theilslopes(a, v, method="joint")  # intercept: median of a − slope·v
+    margin = 0.25 * (hi - lo)
+    return AreaLaw(float(slope), float(intercept), float(lo - margin), float(hi + margin))
+
+
+def _box_area(boxes: np.ndarray) -> np.ndarray:
+    return np.prod(np.clip(boxes[..., 2:] - boxes[..., :2], 0.0, None), axis=-1)
+
+
 def _overlap_fraction(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Intersection over the smaller area, ``(n, m)``."""
     lo = np.maximum(a[:, None, :2], b[None, :, :2])
@@ -232,10 +333,18 @@ class BlobTracker:
     Parameters
     ----------
     params : BlobTrackerParams, optional
+    camera : PinholeCamera, optional
+        The calibrated camera of the blobs: gives an a-priori ``A_p`` (a person's projected box) before one is
+        learnt from the scene.
     """
 
-    def __init__(self, params: BlobTrackerParams | None = None) -> None:
+    def __init__(self, params: BlobTrackerParams | None = None, camera: PinholeCamera | None = None) -> None:
         self.params = BlobTrackerParams() if params is None else params
+        self._prior = None if camera is None else self._camera_prior(camera)
+        self._law: AreaLaw | None = None
+        self._n_sized = 0  # samples ever added to _sizes
+        self._n_fitted = 0  # ... when _law was last fitted
+        self._placeholders: set[int] = set()  # object ids standing for a group of unknown member count
         self._nodes: dict[int, _Node] = {}
         self._splits: dict[int, _Split] = {}
         self._object_hist: dict[int, np.ndarray | None] = {}
@@ -404,7 +513,7 @@ class BlobTracker:
     def _merge(self, nodes: list[_Node], box: np.ndarray, centroid: np.ndarray, hist: np.ndarray | None) -> None:
         self._settle_before_merge(nodes)
         members = frozenset().union(*(n.members for n in nodes))
-        label = NodeLabel.GROUP if len(members) > 1 else NodeLabel.OBJECT
+        label = NodeLabel.GROUP if len(members) > 1 or members & self._placeholders else NodeLabel.OBJECT
         vel = np.mean([n.x[2:] for n in nodes], axis=0)
         g = self._new_node(box, centroid, hist, label, members, tuple(n.node_id for n in nodes), vel)
         g.n_seen = max(n.n_seen for n in nodes) + 1
@@ -418,7 +527,7 @@ class BlobTracker:
             self._settle_before_merge(nodes)
         members = frozenset().union(*(n.members for n in nodes))
         kind = "split" if len(nodes) == 1 else "complex"
-        label = NodeLabel.GROUP if len(members) > 1 else NodeLabel.OBJECT
+        label = NodeLabel.GROUP if len(members) > 1 or members & self._placeholders else NodeLabel.OBJECT
         parents = tuple(n.node_id for n in nodes)
         vel = np.mean([n.x[2:] for n in nodes], axis=0)
         sid = self._next_split
@@ -445,20 +554,23 @@ class BlobTracker:
         _, comp = connected_components(coo_matrix(gaps.astype(np.float64)), directed=False)
         for c in np.unique(comp):
             group = [js[k] for k in np.flatnonzero(comp == c)]
-            oid = self._new_object(hists[group[0]] if len(group) == 1 else None)
+            bx = boxes[group]
+            crowd = self._is_crowd(np.r_[bx[:, :2].min(axis=0), bx[:, 2:].max(axis=0)])  # A5 §4: n̂ >= 1.7
+            hist = hists[group[0]] if len(group) == 1 else None
+            oid = self._placeholder(hist) if crowd else self._new_object(hist)
+            label = NodeLabel.GROUP if crowd else NodeLabel.OBJECT
             if len(group) == 1:
-                n = self._new_node(boxes[group[0]], cents[group[0]], hists[group[0]], NodeLabel.OBJECT,
-                                   frozenset({oid}))
+                n = self._new_node(boxes[group[0]], cents[group[0]], hists[group[0]], label, frozenset({oid}))
                 self.events.append(BlobEvent(self._frame, "appear", (), (n.node_id,)))
                 continue
             sid = self._next_split
             self._next_split += 1
             children = []
             for j in group:
-                n = self._new_node(boxes[j], cents[j], hists[j], NodeLabel.OBJECT, frozenset({oid}))
+                n = self._new_node(boxes[j], cents[j], hists[j], label, frozenset({oid}))
                 n.split = sid
                 children.append(n.node_id)
-            self._splits[sid] = _Split(NodeLabel.OBJECT, frozenset({oid}), children, self._frame)
+            self._splits[sid] = _Split(label, frozenset({oid}), children, self._frame)
             self.events.append(BlobEvent(self._frame, "appear", (), tuple(children)))
 
     # -- labelling (A5 §3-4) ------------------------------------------------------------------------
@@ -511,12 +623,22 @@ class BlobTracker:
                 n.label = NodeLabel.FRAGMENT if s.parent_label == NodeLabel.OBJECT else NodeLabel.GROUP
             return
         hist = [self._cluster_hist(c) for c in clusters]
-        if len(s.members) <= 1:  # an object that splits into diverging parts was an unresolved group
-            owners = [frozenset({self._new_object(h)}) for h in hist]
+        crowd = [self._is_crowd(self._union_box(c)) for c in clusters]  # A5 §4: each child is O, or G if n̂ >= 1.7
+        if len(s.members) <= 1:  # an object (or an unknown group) that splits into diverging parts: new ids
+            owners = [frozenset({self._placeholder(h) if g else self._new_object(h)})
+                      for h, g in zip(hist, crowd, strict=True)]
         else:  # a group splits: members get their ids back by colour (X2 on 1 − BC)
             owners = self._restore(sorted(s.members), hist)
-        for c, own in zip(clusters, owners, strict=True):
-            label = NodeLabel.GROUP if len(own) > 1 else (NodeLabel.OBJECT if len(c) == 1 else NodeLabel.FRAGMENT)
+        for k, (c, own) in enumerate(zip(clusters, owners, strict=True)):
+            if crowd[k] and len(own) == 1 and not own & self._placeholders:
+                if own <= s.members:  # one known person and others
+                    own = owners[k] = own | {self._placeholder(None)}
+                else:  # a new id (no member looked like it): it stands for the whole group
+                    self._placeholders |= own
+            elif not crowd[k] and len(own) == 1:  # one person's size: a placeholder id is now that person's
+                self._placeholders -= own
+            label = NodeLabel.GROUP if len(own) > 1 or own & self._placeholders else \
+                (NodeLabel.OBJECT if len(c) == 1 else NodeLabel.FRAGMENT)
             for n in c:
                 n.members = own
                 n.label = label
@@ -578,43 +700,95 @@ class BlobTracker:
                     n.members = own
                     n.label = NodeLabel.OBJECT if len(c) == 1 else NodeLabel.FRAGMENT
 
-    def expected_area(self, v_bottom_px: np.ndarray) -> np.ndarray | None:
-        """A5's size prior ``A_p(v)``: single-person box area at bottom row ``v`` (px²), ``None`` until learnt."""
-        if len(self._sizes) < self.params.size_samples:
+    @property
+    def area_law(self) -> AreaLaw | None:
+        """The learnt straight line ``A_p(v)``, None until enough single objects spread over rows were seen."""
+        p = self.params
+        if self._n_sized - self._n_fitted >= p.window or (self._law is None and self._n_sized > self._n_fitted):
+            self._n_fitted = self._n_sized
+            if len(self._sizes) >= p.size_samples:
+                v, a = np.array(self._sizes).T
+                self._law = fit_person_area(v, a, min_samples=p.size_samples, min_spread_px=p.size_spread_px)
+        return self._law
+
+    def expected_area(self, v_bottom_px: np.ndarray) -> np.ndarray:
+        """A5's size prior ``A_p(v)``: one person's box area at bottom rows ``v`` (px²); NaN where unknown.
+
+        The learnt line (:attr:`area_law`) where it is valid, else the camera's a-priori area, else NaN.
+        """
+        v = np.asarray(v_bottom_px, np.float64)
+        law = self.area_law
+        out = np.full(v.shape, np.nan) if law is None else law(v)
+        if self._prior is not None:
+            rows, areas = self._prior
+            prior = np.interp(v, rows, areas, left=np.nan, right=np.nan)
+            out = np.where(np.isfinite(out), out, prior)
+        return out
+
+    def n_hat(self, boxes_px: np.ndarray) -> np.ndarray:
+        """``n̂ = area / A_p(v_bottom)`` of boxes ``(n, 4)``: how many people they hold; NaN where ``A_p`` is unknown."""
+        b = np.asarray(boxes_px, np.float64).reshape(-1, 4)
+        return _box_area(b) / self.expected_area(b[:, 3])
+
+    def _camera_prior(self, camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray] | None:
+        """Projected box area of an upright person whose feet are at row ``v`` of the central column."""
+        p = self.params
+        rows = np.arange(0.0, camera.height + 1.0, 2.0)
+        feet = camera.backproject_to_floor(np.column_stack([np.full(rows.size, camera.K[0, 2]), rows]))
+        ok = np.all(np.isfinite(feet), axis=1)
+        if not ok.any():
+            log.warning("camera %dx%d sees no floor: no a-priori person size", camera.width, camera.height)
             return None
-        v, a = np.array(self._sizes).T
-        if np.ptp(v) < 10.0:
-            return np.full(np.shape(v_bottom_px), float(np.median(a)))
-        slope, icpt = np.polyfit(v, a, 1)
-        return np.maximum(icpt + slope * np.asarray(v_bottom_px, np.float64), 1.0)
+        boxes = camera.person_box(feet[ok, :2], p.person_height_m, p.person_width_ratio)
+        boxes = np.clip(boxes, 0.0, [camera.width, camera.height, camera.width, camera.height])
+        area = _box_area(boxes)
+        good = np.isfinite(area) & (area > 0)
+        if good.sum() < 2:
+            return None
+        return rows[ok][good], area[good]
+
+    def _union_box(self, nodes: list[_Node]) -> np.ndarray:
+        boxes = np.array([n.history[-1][2] if n.missed == 0 else n.box() for n in nodes])
+        return np.r_[boxes[:, :2].min(axis=0), boxes[:, 2:].max(axis=0)]
+
+    def _is_crowd(self, box: np.ndarray) -> bool:
+        """A5 §4's ``n̂ >= group_n_hat`` (False while ``A_p`` is unknown or the rule is off)."""
+        g = self.params.group_n_hat
+        return g > 0 and bool(self.n_hat(box)[0] >= g)
+
+    def _placeholder(self, hist: np.ndarray | None) -> int:
+        oid = self._new_object(hist)
+        self._placeholders.add(oid)
+        return oid
 
     def _size_prior(self) -> None:
         """Learn ``A_p`` from confirmed single objects; collapse groups that stay one person's size (A5 §3)."""
         p = self.params
-        if p.group_collapse <= 0:
-            return
         for owner, nodes in self._owners().items():
             seen = [n for n in nodes if n.missed == 0]
             if not seen:
                 continue
-            boxes = np.array([n.history[-1][2] for n in seen])
-            box = np.r_[boxes[:, :2].min(axis=0), boxes[:, 2:].max(axis=0)]
-            area = float(np.prod(box[2:] - box[:2]))
-            if len(owner) == 1 and all(n.label == NodeLabel.OBJECT and n.n_seen >= p.window for n in nodes):
+            box = self._union_box(seen)
+            area = float(_box_area(box))
+            if len(owner) == 1 and not owner & self._placeholders \
+                    and all(n.label == NodeLabel.OBJECT and n.n_seen >= p.window for n in nodes):
                 self._sizes.append((float(box[3]), area))
+                self._n_sized += 1
                 continue
-            if len(owner) == 1:
+            if p.group_collapse <= 0 or (len(owner) == 1 and not owner & self._placeholders):
                 continue
-            expected = self.expected_area(np.array([box[3]]))
-            if expected is None:
+            expected = float(self.expected_area(np.array([box[3]]))[0])
+            if not np.isfinite(expected):
                 continue
-            small = area < p.group_collapse * float(expected[0])
+            small = area < p.group_collapse * expected
             for n in nodes:
                 n.small = n.small + 1 if small else 0
             if min(n.small for n in nodes) >= p.window:
                 hist = self._cluster_hist(nodes)
-                keep = min(sorted(owner), key=lambda m: _bc_cost(hist, self._object_hist.get(m)))
+                real = sorted(owner - self._placeholders) or sorted(owner)
+                keep = min(real, key=lambda m: _bc_cost(hist, self._object_hist.get(m)))
                 log.debug("frame %d: group %s has one person's size; keeps %d", self._frame, sorted(owner), keep)
+                self._placeholders.discard(keep)
                 for n in nodes:
                     n.members = frozenset({keep})
                     n.label = NodeLabel.OBJECT if len(nodes) == 1 else NodeLabel.FRAGMENT
@@ -644,7 +818,7 @@ class BlobTracker:
                     rest = frozenset({self._new_object(self._cluster_hist(nodes))})
                 for n in nodes:
                     n.members = rest
-                    if len(rest) == 1 and n.label == NodeLabel.GROUP:
+                    if len(rest) == 1 and n.label == NodeLabel.GROUP and not rest & self._placeholders:
                         n.label = NodeLabel.OBJECT if len(nodes) == 1 else NodeLabel.FRAGMENT
 
     def _output(self) -> list[TrackedObject]:
@@ -663,10 +837,13 @@ class BlobTracker:
             nodes = by_owner[owner]
             if max(n.n_seen for n in nodes) < p.n_confirm:
                 continue
-            seen = [n for n in nodes if n.missed == 0] or nodes
-            boxes = np.array([n.history[-1][2] if n.missed == 0 else n.box() for n in seen])
-            box = np.r_[boxes[:, :2].min(axis=0), boxes[:, 2:].max(axis=0)]
-            group = len(owner) > 1
+            box = self._union_box([n for n in nodes if n.missed == 0] or nodes)
+            unknown = owner & self._placeholders
+            group = len(owner) > 1 or bool(unknown)
             gid = min(n.node_id for n in nodes) if group else -1
-            out.append(TrackedObject(oid, box, group, gid, min(n.missed for n in nodes)))
+            size = len(owner)
+            if unknown:  # a placeholder stands for two or more people
+                n_hat = float(self.n_hat(box)[0])
+                size = max(size + len(unknown), round(n_hat) if np.isfinite(n_hat) else 0)
+            out.append(TrackedObject(oid, box, group, gid, min(n.missed for n in nodes), size, not unknown))
         return sorted(out, key=lambda o: o.object_id)
