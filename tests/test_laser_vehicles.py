@@ -246,6 +246,21 @@ def _empty_road_scan(t_ns: int, sensor: str = "laser_0", ranges=None) -> LaserSc
     return LaserScan(t_ns, sensor, sensor, -math.pi / 2, math.pi / n, 0.05, 60.0, r)
 
 
+def test_road_roi_rectangles_give_the_general_polygon_distance() -> None:
+    """The rectangle fast path of :class:`RoadROI` equals the general signed boundary distance (any polygon)."""
+    from fusiontrack.tracking.situations import boundary_distance
+
+    rng = np.random.default_rng(3)
+    roi = RoadROI.from_roads([[-60.0, 0.0, 60.0, 0.0, 14.0], [0.0, -50.0, 10.0, 40.0, 7.0]], margin_m=3.0)
+    p = np.vstack([rng.uniform(-80, 80, (5000, 2)), [[np.nan, 0.0], [0.0, 7.0], [60.0, 7.0]]])
+    general = np.stack([boundary_distance(p, a) for a in roi.polygons])
+    np.testing.assert_allclose(roi._signed(p), general, atol=1e-9)
+    assert np.array_equal(roi.contains(p), general.max(axis=0) > -3.0)
+    tri = RoadROI([np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]])], margin_m=0.0)
+    assert tri.contains([[2.0, 2.0]]).tolist() == [True]
+    assert tri.contains([[8.0, 8.0]]).tolist() == [False]
+
+
 def test_bad_configuration_names_the_parameter() -> None:
     pose = {"laser_0": pose2d_to_matrix(0.0, -8.0, math.pi / 2)}
     with pytest.raises(ConfigError, match="gate_m"):

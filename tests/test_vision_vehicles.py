@@ -205,6 +205,35 @@ def test_rendered_cuboid_footprint_centre_velocity_and_bad_frames():
     assert det.n_skipped == 2
 
 
+@pytest.mark.parametrize("scale", [1, 2])
+def test_processing_scale_keeps_boxes_in_full_resolution_pixels(scale):
+    """A shrunk processing (``processing_scale``) maps its blobs back: the box of a rendered cuboid 20-50 m away is
+    its true image box (pixel edges) to within the processing pixel and the rasteriser's pixel."""
+    rng = np.random.default_rng(2)
+    cam = pole_camera()
+    background = cv2.GaussianBlur(np.clip(rng.normal(110, 12, (480, 640, 3)), 0, 255).astype(np.uint8), (0, 0), 1.0)
+    det = detector_for(cam, processing_scale=scale)
+    t = T0
+    for _ in range(40):
+        assert det(cuboid_frame(cam, background, np.array([500.0, 0.0]), rng), t_ns=t) == []
+        t += DT_NS
+    u0, v0, u1, v1 = det.window(640, 480)
+    assert (u1 - u0) % scale == 0
+    assert (v1 - v0) % scale == 0
+    worst = 0.0
+    for k in range(20):
+        centre = np.array([-20.0 + 1.5 * k, -1.75])
+        found = det(cuboid_frame(cam, background, centre, rng), t_ns=t)
+        t += DT_NS
+        assert len(found) == 1
+        L, W, Hh = 4.5, 1.8, 1.5
+        dx, dy, dz = np.meshgrid([-L / 2, L / 2], [-W / 2, W / 2], [0.0, Hh])
+        uv = cam.project(np.column_stack([centre[0] + dx.ravel(), centre[1] + dy.ravel(), dz.ravel()]))
+        true_box = np.r_[np.floor(uv.min(axis=0) + 0.5), np.ceil(uv.max(axis=0) + 0.5)]  # pixel edges
+        worst = max(worst, float(np.abs(found[0].box_px - true_box).max()))
+    assert worst <= scale + 1
+
+
 # --------------------------------------------------------------------------------------------------
 # A simulated road clip: camera_0 with lens distortion, a 0.4 s outage and the light dropping to 0.55x
 # --------------------------------------------------------------------------------------------------
@@ -238,7 +267,42 @@ def road_clip(tmp_path_factory: pytest.TempPathFactory) -> dict:
                            "stray": stray.sum() / roi.sum()})
         start_ns = rec.start_ns
         window = list(vehicle_detections_for_recording(rec, roads, stop_ns=start_ns + 2_000_000_000))
-    return {"frames": frames, "roads": roads, "roi": det.roi_mask(640, 480), "camera": true_cam, "window": window}
+    return {"frames": frames, "roads": roads, "roi": det.roi_mask(640, 480), "camera": true_cam, "window": window,
+            "path": out, "crop": det.window(640, 480)}
+
+
+def test_clip_window_holds_every_vehicle_standing_in_the_roi(road_clip):
+    """The processed window (``crop_to_road``) holds the true image box of every vehicle seen whole whose
+    bottom-centre lies in the ROI, and processing only the window gives the detections of processing the whole
+    image."""
+    u0, v0, u1, v1 = road_clip["crop"]
+    roi = road_clip["roi"]
+    assert (u1 - u0) * (v1 - v0) < 0.8 * 640 * 480
+    rows, cols = np.nonzero(roi)
+    assert u0 <= cols.min()
+    assert cols.max() < u1
+    assert v0 <= rows.min()
+    assert rows.max() < v1
+    n = 0
+    for fr in road_clip["frames"]:
+        tb = np.asarray(fr["truth"].attributes["box_px"], np.float64).reshape(-1, 4)
+        whole = np.all(np.isfinite(tb), axis=1) & np.all(tb[:, :2] > 0, axis=1) & (tb[:, 2] < 640) & (tb[:, 3] < 480)
+        for b in tb[whole]:  # a box cut by the image's border shows a vehicle the simulator projects beyond it
+            bc = np.clip(np.floor([(b[0] + b[2]) / 2, b[3] - 0.5]).astype(int), 0, [639, 479])
+            if b[2] - b[0] >= 1 and b[3] - b[1] >= 1 and roi[bc[1], bc[0]]:
+                n += 1
+                assert np.all(b >= [u0, v0, u0, v0]), b
+                assert np.all(b <= [u1, v1, u1, v1]), b
+    assert n > 50
+    with Recording(road_clip["path"]) as rec:
+        (topic, whole), = vehicle_detectors_for_recording(rec, road_clip["roads"], ["camera_0"], VehicleDetectorParams(
+            crop_to_road=False)).values()
+        (_, crop), = vehicle_detectors_for_recording(rec, road_clip["roads"], ["camera_0"]).values()
+        for im in rec.messages([topic], stop_ns=rec.start_ns + 4_000_000_000):
+            a, b = whole(im), crop(im)
+            assert [d.box_px.tolist() for d in a] == [d.box_px.tolist() for d in b]
+            np.testing.assert_allclose([d.position_m for d in a], [d.position_m for d in b], atol=1e-9)
+    assert whole.window(640, 480) == (0, 0, 640, 480)
 
 
 def match(frame: dict) -> tuple[list[tuple[int, int]], np.ndarray, np.ndarray, np.ndarray]:

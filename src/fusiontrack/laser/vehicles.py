@@ -646,6 +646,7 @@ class RoadROI:
         self.directions_rad = np.asarray(directions_rad, dtype=np.float64).reshape(-1)
         if self.directions_rad.size != len(polys) or not np.all(np.isfinite(self.directions_rad)):
             raise ConfigError(f"directions_rad: expected {len(polys)} finite angles, got {directions_rad!r}")
+        self._rects = _rectangles(polys)
 
     @classmethod
     def from_roads(cls, roads: Any, margin_m: float = 3.0) -> RoadROI:
@@ -673,10 +674,40 @@ class RoadROI:
         return self.directions_rad[np.argmax(self._signed(points_m), axis=0)]
 
     def _signed(self, points_m: Any) -> np.ndarray:
+        """Signed distance ``(polygons, n)`` of each point to each polygon's boundary, positive inside: the
+        rectangles (every road of :meth:`from_roads`) all at once in their own frames, other polygons by
+        :func:`~fusiontrack.tracking.situations.boundary_distance`."""
         p = np.asarray(points_m, dtype=np.float64).reshape(-1, 2)
         if p.shape[0] == 0:
             return np.zeros((len(self.polygons), 0))
+        if self._rects is not None:
+            centre, axes, half = self._rects
+            local = np.abs(np.einsum("rij,rnj->rni", axes, p[None] - centre[:, None]))  # (r, n, 2)
+            gap = local - half[:, None]
+            out = np.hypot(np.maximum(gap[..., 0], 0.0), np.maximum(gap[..., 1], 0.0))
+            inner = gap.max(axis=2)
+            with np.errstate(invalid="ignore"):
+                return np.where(inner < 0, -inner, -out)
         return np.stack([boundary_distance(p, a) for a in self.polygons])
+
+
+def _rectangles(polygons: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Centres ``(r, 2)``, unit axes ``(r, 2, 2)`` (rows) and half extents ``(r, 2)`` when every polygon is a
+    rectangle (four vertices, right angles, opposite sides equal), else ``None``."""
+    centres, axes, halves = [], [], []
+    for a in polygons:
+        if a.shape[0] != 4:
+            return None
+        e = np.roll(a, -1, axis=0) - a
+        length = np.hypot(e[:, 0], e[:, 1])
+        scale = max(float(length.max()), 1e-12)
+        if (length.min() <= 1e-9 * scale or abs(float(e[0] @ e[1])) > 1e-9 * scale**2
+                or np.abs(e[0] + e[2]).max() > 1e-9 * scale or np.abs(e[1] + e[3]).max() > 1e-9 * scale):
+            return None
+        centres.append(a.mean(axis=0))
+        axes.append(e[:2] / length[:2, None])
+        halves.append(length[:2] / 2)
+    return np.array(centres), np.array(axes), np.array(halves)
 
 
 def road_roi(roads: Any, margin_m: float = 3.0) -> RoadROI | None:
