@@ -56,6 +56,28 @@ def test_fused_particle_filter_tracks_the_simulated_vehicles(road, run):
     assert all(run.detections[s] > 0 for s in run.sensors)
 
 
+def test_time_is_measured_per_part_by_the_clock_and_the_cpu(run):
+    parts = ("laser_branch", "camera_branch", "fusion_pf", "scene")
+    assert all(run.timings_s[p] > 0 and run.cpu_s[p] > 0 for p in parts)
+    assert set(run.cpu_s) == set(run.timings_s)
+    assert 0 < run.speed_x_real_time(cpu=True) < np.inf
+
+
+def test_every_camera_frame_or_every_second_one(road, run):
+    """The default ``camera_every = 2`` gives each camera's branch half of its frames (about half the camera
+    detections of ``camera_every = 1``, the lasers' untouched); both follow the simulated vehicles."""
+    path, gt = road
+    assert TrafficParams().camera_every == 2
+    res = track_traffic(path, params=TrafficParams(camera_every=1), variants=("fusion_pf",))
+    for cam in ("camera_0", "camera_1"):
+        assert 0.35 * res.detections[cam] <= run.detections[cam] <= 0.65 * res.detections[cam]
+    for las in ("laser_0", "laser_1"):
+        assert res.detections[las] == run.detections[las]
+    m = evaluate_vehicles(*_after_warm_up(gt, res.states["fusion_pf"]), area=AREA, rate_hz=15)
+    assert m.recall >= 0.8
+    assert m.precision >= 0.8
+
+
 def test_the_scripted_road_leaving_is_detected_near_its_onset(road, run):
     truth = [e for e in read_incidents(road[0]) if e.kind == "road_leaving"]
     assert truth, "the road scenario's seed 0 leaves the road within the first 16 s"
@@ -118,3 +140,8 @@ def test_bad_traffic_settings_are_named():
         TrafficParams.from_mapping({"fusion": {"gate": 3}})
     with pytest.raises(ConfigError, match="no road"):
         roads_of(np.zeros((0, 5)))
+    for name in ("camera_every", "laser_every"):
+        for bad in (0, True, 1.5):
+            with pytest.raises(ConfigError, match=name):
+                TrafficParams(**{name: bad})
+        assert getattr(TrafficParams.from_mapping({name: 3}), name) == 3

@@ -92,8 +92,9 @@ def run_traffic(recording: str | Path, output: str | Path, *, geometry: Any = No
     summary: dict[str, Any] = {
         "recording": str(recording), "sensors": result.sensors, "duration_s": result.duration_s,
         "fusion_instants": result.n_ticks, "detections_per_sensor": result.detections,
-        "messages_skipped": result.errors, "time_s": result.timings_s,
-        "x_real_time": result.speed_x_real_time(), "tracks": len({s.track_id for s in states}),
+        "messages_skipped": result.errors, "time_s": result.timings_s, "cpu_s": result.cpu_s,
+        "x_real_time": result.speed_x_real_time(), "x_real_time_cpu": result.speed_x_real_time(cpu=True),
+        "tracks": len({s.track_id for s in states}),
         "events": _count_kinds(result.scene_events),
     }
     area = None
@@ -143,8 +144,8 @@ def _report(path: Path, recording: Path, result: TrafficResult, summary: dict[st
                 note="onset latency: event start minus incident start; alarm latency: when the rule fired "
                      "(after its hold time) minus incident start.")
     spent = result.timings_s
-    r.table("Time spent", [{"part": k, "seconds": v, "ms per recording second":
-                            1e3 * v / result.duration_s if result.duration_s else math.nan}
+    r.table("Time spent", [{"part": k, "seconds": v, "CPU seconds": result.cpu_s.get(k, math.nan),
+                            "ms per recording second": 1e3 * v / result.duration_s if result.duration_s else math.nan}
                            for k, v in spent.items()])
     truth = read_incidents(recording) if (recording / "ground_truth" / "incidents.jsonl").is_file() else []
     if result.scene_events or truth:
