@@ -8,7 +8,7 @@ another (no parallel load on the timings):
 * camera-only: :func:`fusiontrack.vision.people.track_camera` (foreground blobs, the calibrated camera's
   floor positions);
 * fusion: :func:`fusiontrack.fusion.track_fused` (the same laser tracker + per-target classifiers: B15
-  learning, B16 score maps, B17 identities at splits).
+  learning, B16 score maps, B17 identities at splits, identity checks after close contacts).
 
 Columns: MOTA, IDF1, HOTA (floor, match 0.5 m), ID switches, merge/split events resolved correctly out of all
 true ones, and time per frame. A true split (:func:`fusiontrack.sim.situations.situation_events`, after the
@@ -178,12 +178,13 @@ def main() -> None:
 
     use = Table(title="fusion: what the camera was used for (summed over seeds)", header_style="bold")
     for col in ("scenario", "laser steps", "images read", "training frames", "score maps", "splits",
-                "by appearance", "appearance overrode motion"):
+                "by appearance", "appearance overrode motion", "identity checks", "exchanged"):
         use.add_column(col, justify="left" if col == "scenario" else "right")
     for name in ("crowd", "groups"):
         st = [r["stats"] for (n, _), r in results.items() if n == name]
         use.add_row(name, *(str(sum(getattr(s, f) for s in st)) for f in (
-            "steps", "frames_used", "train_frames", "score_maps", "splits", "splits_by_appearance", "overrides")))
+            "steps", "frames_used", "train_frames", "score_maps", "splits", "splits_by_appearance", "overrides",
+            "checks", "exchanges")))
     console.print(use)
 
     targets = Table(title="B19 targets (all scenarios and seeds)", header_style="bold")

@@ -7,6 +7,7 @@ is where, its situation events say when the two merge and split.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -151,3 +152,72 @@ def test_fusion_tracker_without_interaction_never_reads_the_camera():
     assert all(s.sensors == ("laser",) for s in states)
     assert frames.read == 0
     assert len(trk.bank) == 0
+
+
+def test_relabel_states_swaps_only_inside_each_window_in_decision_order():
+    from fusiontrack.fusion.tracker import Relabel, relabel_states
+    from fusiontrack.types import TrackState
+
+    states = [TrackState(t, "laser", tid, np.array([float(tid), 0.0]), np.zeros(2))
+              for t in range(10) for tid in (1, 2, 3)]
+    # 1 and 2 exchanged over [3, 6); then (named after that exchange) 2 and 3 over [5, 8)
+    out = relabel_states(states, [Relabel(3, 6, 1, 2), Relabel(5, 8, 2, 3)])
+    who = {(s.t_ns, int(s.position_m[0])): s.track_id for s in out}  # position = the raw track's id
+    for t in range(10):
+        step1 = {1: 2, 2: 1, 3: 3} if 3 <= t < 6 else {1: 1, 2: 2, 3: 3}
+        step2 = {1: 1, 2: 3, 3: 2} if 5 <= t < 8 else {1: 1, 2: 2, 3: 3}
+        for raw in (1, 2, 3):
+            assert who[(t, raw)] == step2[step1[raw]], (t, raw)
+    assert relabel_states(states, []) == states
+    assert all(a is b for a, b in zip(out, states, strict=True) if a.track_id == b.track_id)
+
+
+def test_assignment_gap_is_the_margin_of_the_best_assignment():
+    from fusiontrack.fusion.tracker import _assignment_gap
+
+    s = np.array([[0.8, -0.2], [0.1, 0.5]])
+    assert _assignment_gap(s) == pytest.approx((0.8 + 0.5) - (-0.2 + 0.1))
+    # three members, two pieces: 6 assignments; best (0 -> m2, 1 -> m0) = 1.6, second (0 -> m2, 1 -> m1) = 1.3
+    s3 = np.array([[0.0, 0.1, 0.9], [0.7, 0.4, -0.5]])
+    assert _assignment_gap(s3) == pytest.approx(1.6 - 1.3)
+    assert _assignment_gap(np.array([[0.3]])) == np.inf
+
+
+def test_identity_check_undoes_an_exchange_the_laser_made_at_a_split(pair, monkeypatch):
+    """The laser tracker is made to exchange the two people's ids right after their first split (a wrong
+    motion decision); the camera's identity check must exchange them back, and the output (relabelled back
+    to the split) must follow each person with the same track before the merge and after every split."""
+    from fusiontrack.tracking.tracker import LaserPeopleTracker
+
+    orig = LaserPeopleTracker.step
+    injected: list[int] = []
+
+    def step(self, t_ns, detections):
+        states = orig(self, t_ns, detections)
+        split = [e for e in self.events if e.kind == "split" and len(e.track_ids) == 2]
+        if split and not injected:
+            a, b = split[0].track_ids
+            ia, ib = np.flatnonzero(self._id == a), np.flatnonzero(self._id == b)
+            if ia.size and ib.size:
+                self._id[ia[0]], self._id[ib[0]] = b, a
+                injected.append(t_ns)
+                swap = {a: b, b: a}
+                states = [dataclasses.replace(s, track_id=swap.get(s.track_id, s.track_id)) for s in states]
+        return states
+
+    monkeypatch.setattr(LaserPeopleTracker, "step", step)
+    params = FusionParams(split_identity=False)
+    states, events, stats = track_fused(pair["path"], params=params, tracker_params=SIM_PF, **pair["kw"])
+    assert injected
+    assert stats.exchanges >= 1
+    exchanged = [e for e in events if e.kind == "identity"]
+    assert exchanged
+    assert exchanged[0].attributes["from_ns"] <= exchanged[0].t_ns
+    merges = [e for e in pair["truth"] if e.kind == "merge"]
+    agents = sorted(merges[0].track_ids)
+    before = [_track_at(states, pair["gt"], a, merges[0].t_ns - 300_000_000) for a in agents]
+    assert None not in before
+    assert len(set(before)) == 2
+    for split in (e for e in pair["truth"] if e.kind == "split"):
+        after = [_track_at(states, pair["gt"], a, split.t_ns + 1_000_000_000) for a in agents]
+        assert after == before, (split.t_ns, before, after)

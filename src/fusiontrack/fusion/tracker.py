@@ -12,12 +12,22 @@
      per camera frame and target;
    * a merged target that splits (B17): each piece's box is scored by the members' classifiers
      (:meth:`~fusiontrack.vision.appearance.AppearanceBank.box_scores`) and the members are given to the
-     pieces by the Hungarian algorithm on ``−score``, when every member has a trained classifier; by motion
-     otherwise;
-2. **learning** [B15] — a noncorrelated target with another target within ``d_train_m`` (1.5 m) learns from
+     pieces by the Hungarian algorithm on ``−score``, when every member has a trained classifier and the
+     best assignment beats the second best by ``split_margin``; by motion otherwise;
+2. **identity checks** [RECON, extends B17] — at a split the people are still side by side and their boxes
+   overlap, and a close pass without a merge never asks the camera at all. So every pair of tracks that comes
+   within ``d_contact_m`` (or merges or splits together) is *checked*: on the next camera images on which both
+   are walking targets with boxes clear of every other box, each trained classifier of the pair compares its
+   own track's box with the other one. When the mean evidence over ``check_frames`` images or more passes
+   ``check_margin``, the identities are confirmed or exchanged: the laser tracker's two ids are swapped from
+   then on, and :attr:`FusionTracker.relabels` records the exchange back to where it most likely happened
+   (the pair's last split, else its closest approach); :func:`track_fused` applies it to the states already
+   returned (:func:`relabel_states`, like B17's re-linking of the merged interval);
+3. **learning** [B15] — a noncorrelated target with another target within ``d_train_m`` (1.5 m) learns from
    the camera image nearest in time: positives from its projected box (B11), negatives from the boxes of
    its ``L`` closest targets (patches centred in another box are dropped); at most once every
-   ``train_interval_s``; merged targets' classifiers are frozen.
+   ``train_interval_s``; merged targets' classifiers are frozen, and so is a trained classifier while its
+   track waits for an identity check (it could be following the other person).
 
 The camera image is converted only when one of these needs it (:class:`~fusiontrack.fusion.frames.LazyFrames`),
 so with no interaction the fused tracker costs what the laser one costs. Each output state names the sensors
@@ -29,6 +39,7 @@ that confirmed its step: the laser's, plus the camera's when the image was used 
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import logging
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -44,11 +55,12 @@ from ..tracking.tracker import LaserPeopleTracker, TrackerParams, run_tracker
 from ..types import Detection, Event, Image, Situation, TrackState
 from ..vision.appearance import AppearanceBank, AppearanceParams
 
-__all__ = ["FrameSource", "FusionParams", "FusionStats", "FusionTracker", "track_fused"]
+__all__ = ["FrameSource", "FusionParams", "FusionStats", "FusionTracker", "Relabel", "relabel_states", "track_fused"]
 
 log = logging.getLogger(__name__)
 
 _LEARNING = (str(Situation.NONCORRELATED), str(Situation.APPEARING))
+_MERGED = str(Situation.MERGED)
 
 
 class FrameSource(Protocol):
@@ -84,8 +96,23 @@ class FusionParams:
     split_identity : bool
         B17 on (classifiers decide identities at splits).
     split_margin : float
-        Two-member splits: appearance decides only if the best assignment beats the other one by this much
-        summed confidence [RECON; 0.3 measured on simulated groups]; motion otherwise.
+        Appearance decides a split only if its best assignment of members to pieces beats the second best by
+        this much summed confidence [RECON]; motion otherwise.
+    check_identity : bool
+        Identity checks after close contacts (see the module docstring) [RECON].
+    d_contact_m : float
+        Two tracks closer than this (B6's gate, 2h), or in one merge or split, may have exchanged identities:
+        their pair is checked [RECON].
+    check_margin : float
+        A check decides once the mean evidence per classifier (own box's confidence minus the other box's) is
+        at least this far from 0 over ``check_frames`` clear images or more: keep (> 0) or exchange (< 0) [RECON].
+    check_frames : int
+        Clear camera images a check needs before it decides [RECON].
+    check_s : float
+        A check still undecided this long after the pair was last within ``d_train_m`` is dropped [RECON].
+    max_overlap : float
+        An image is clear for a check when neither box of the pair has more than this fraction of its area
+        inside another target's box (occlusion) [RECON].
     height_m, width_ratio : float
         B11's person box (``H_p``, ``r_w``).
     max_frame_dt_s : float
@@ -100,15 +127,25 @@ class FusionParams:
     score_beta: float = 0.5
     group_m: float = 1.0
     split_identity: bool = True
-    split_margin: float = 0.3
+    split_margin: float = 1.0
+    check_identity: bool = True
+    d_contact_m: float = 0.8
+    check_margin: float = 0.4
+    check_frames: int = 3
+    check_s: float = 4.0
+    max_overlap: float = 0.3
     height_m: float = 1.70
     width_ratio: float = 0.40
     max_frame_dt_s: float = 0.05
     appearance: AppearanceParams = field(default_factory=AppearanceParams)
 
     def __post_init__(self) -> None:
+        if isinstance(self.check_frames, bool) or not isinstance(self.check_frames, int) or self.check_frames < 1:
+            raise ConfigError(f"FusionParams.check_frames: expected an integer >= 1, got {self.check_frames!r}")
+        if not 0 < self.max_overlap <= 1:
+            raise ConfigError(f"FusionParams.max_overlap: expected a fraction in (0, 1], got {self.max_overlap!r}")
         for name in ("d_train_m", "train_interval_s", "score_beta", "group_m", "split_margin", "height_m",
-                     "width_ratio", "max_frame_dt_s"):
+                     "width_ratio", "max_frame_dt_s", "d_contact_m", "check_margin", "check_s"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and np.isfinite(v) and v >= 0):
                 raise ConfigError(f"FusionParams.{name}: expected a finite value >= 0, got {v!r}")
@@ -128,7 +165,79 @@ class FusionStats:
     splits: int = 0  # splits seen
     splits_by_appearance: int = 0
     overrides: int = 0  # splits where appearance gave another assignment than motion
+    checks: int = 0  # identity checks decided
+    exchanges: int = 0  # ... that exchanged the identities of a pair
     camera_s: float = 0.0  # time spent on the camera side (reading, learning, scoring)
+
+
+def _assignment_gap(scores: np.ndarray) -> float:
+    """Summed score of the best one-to-one assignment of rows to columns minus that of the second best (the
+    evidence appearance has for its choice); inf with a single possible assignment."""
+    n_r, n_c = scores.shape
+    k = min(n_r, n_c)
+    if k == 0:
+        return 0.0
+    s = scores if n_r <= n_c else scores.T
+    totals = np.array([s[np.arange(k), list(cols)].sum() for cols in itertools.permutations(range(s.shape[1]), k)])
+    if totals.size < 2:
+        return float("inf")
+    best2 = np.partition(totals, totals.size - 2)[-2:]
+    return float(best2[1] - best2[0])
+
+
+@dataclass(slots=True)
+class _Check:
+    """A pair of tracks that came into contact: their identities wait for the camera's evidence."""
+
+    swap_from_ns: int  # where an exchange would have begun: their last split, else their closest approach
+    closest_m: float
+    near_ns: int  # last step the two were within d_train_m
+    split_seen: bool = False
+    evidence: float = 0.0  # summed per-classifier evidence for the current identities
+    n: int = 0
+    image_ns: int = -1  # the last image that gave evidence
+
+
+@dataclass(frozen=True, slots=True)
+class Relabel:
+    """Two tracks' identities exchanged by an identity check: ``a`` and ``b`` swap in ``[from_ns, to_ns)``
+    (the tracker's own ids are exchanged from ``to_ns`` on)."""
+
+    from_ns: int
+    to_ns: int
+    a: int
+    b: int
+
+
+def relabel_states(states: Sequence[TrackState], relabels: Sequence[Relabel]) -> list[TrackState]:
+    """``states`` with the identity exchanges applied, in the order they were decided (each one names tracks by
+    the ids in force once the earlier ones are applied)."""
+    if not relabels or not states:
+        return list(states)
+    t = np.array([st.t_ns for st in states], np.int64)
+    ids = np.array([st.track_id for st in states], np.int64)
+    new = ids.copy()
+    for r in relabels:
+        window = (t >= r.from_ns) & (t < r.to_ns)
+        is_a, is_b = window & (new == r.a), window & (new == r.b)
+        new[is_a], new[is_b] = r.b, r.a
+    out = list(states)
+    for k in np.flatnonzero(new != ids):
+        out[k] = dataclasses.replace(states[k], track_id=int(new[k]))
+    return out
+
+
+def _occlusion(boxes: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """``(n,)``: the largest fraction of each box's area that lies inside another (valid) box."""
+    b = np.where(ok[:, None], boxes, 0.0)
+    lo = np.maximum(b[:, None, :2], b[None, :, :2])
+    hi = np.minimum(b[:, None, 2:], b[None, :, 2:])
+    inter = np.clip(hi - lo, 0.0, None).prod(axis=2)
+    area = np.maximum((b[:, 2:] - b[:, :2]).prod(axis=1), 1e-9)
+    frac = inter / area[:, None]
+    np.fill_diagonal(frac, 0.0)
+    frac[:, ~ok] = 0.0
+    return frac.max(axis=1) if len(b) else np.zeros(0)
 
 
 def _components(points: np.ndarray, radius_m: float) -> np.ndarray:
@@ -159,6 +268,12 @@ class FusionTracker:
         Normalised once; the laser tracker and the bank get independent streams from it.
     camera_name : str
         The camera's sensor name, added to ``TrackState.sensors`` when its image was used.
+
+    Attributes
+    ----------
+    relabels : list of Relabel
+        The identity exchanges decided so far, in order (apply them with :func:`relabel_states`).
+    stats : FusionStats
     """
 
     def __init__(self, camera: PinholeCamera, frames: FrameSource, params: FusionParams | None = None,
@@ -179,6 +294,8 @@ class FusionTracker:
         self._scored: dict[int, int] = {}  # id -> time of the image last used for its score map
         self._learnt_t: dict[int, int] = {}  # id -> time of its last training step
         self._frames_seen: set[int] = set()
+        self._checks: dict[tuple[int, int], _Check] = {}
+        self.relabels: list[Relabel] = []
 
     @property
     def area_m(self) -> np.ndarray | None:
@@ -190,11 +307,14 @@ class FusionTracker:
 
     # ---------------------------------------------------------------------------------------------
     def step(self, t_ns: int, detections: Sequence[Detection]) -> list[TrackState]:
-        """One laser step, then learning (B15). Returns the states (``sensors`` with the camera where used)."""
+        """One laser step, identity checks, then learning (B15). Returns the states (``sensors`` with the camera
+        where used; ids as exchanged by a check decided at this step, earlier states in :attr:`relabels`)."""
         self._used = set()
         self.stats.steps += 1
         states = self.laser.step(t_ns, detections)
         self.events = list(self.laser.events)
+        if self.params.check_identity and states:
+            states = self._check_identities(int(t_ns), states)
         if states:
             self._learn(int(t_ns), states)
         self._forget(self.events)
@@ -252,10 +372,13 @@ class FusionTracker:
         near = d.min(axis=1) < p.d_train_m
         interval = p.train_interval_s * 1e9
         # an untrained target learns from every image, a trained one every ``train_interval_s``
+        # a trained target waiting for an identity check does not learn (it could be learning the other one)
+        waiting = {tid for pair in self._checks for tid in pair}
         learners = [k for k, s in enumerate(states)
                     if near[k] and s.situation in _LEARNING and s.sensors
                     and (not self.bank.is_trained(s.track_id)
-                         or t_ns - self._learnt_t.get(s.track_id, -(1 << 62)) >= interval)]
+                         or (t_ns - self._learnt_t.get(s.track_id, -(1 << 62)) >= interval
+                             and s.track_id not in waiting))]
         if not learners:
             return
         if self.frames.nearest_time(t_ns) is None:
@@ -290,6 +413,120 @@ class FusionTracker:
         self.stats.train_frames += 1
         self.stats.train_updates += len(updated)
         self.stats.camera_s += time.perf_counter() - t0
+
+    # ---------------------------------------------------------------------------------------------
+    def _check_identities(self, t_ns: int, states: list[TrackState]) -> list[TrackState]:
+        """Open, feed and decide the identity checks of pairs of tracks that came into contact.
+
+        A pair is opened when its tracks come within ``d_contact_m`` or merge or split together. On every camera
+        image on which both are walking targets (not merged) with clear boxes (``max_overlap``), each trained
+        classifier of the two gives its evidence, its confidence on its own track's box minus that on the other
+        box. After ``check_frames`` images, a mean evidence beyond ``± check_margin`` keeps the identities or
+        exchanges them (:meth:`_exchange`); the states of this step are returned with the exchange applied.
+        """
+        p = self.params
+        ids = np.array([st.track_id for st in states], np.int64)
+        pos = np.array([st.position_m for st in states])
+        row = {int(tid): k for k, tid in enumerate(ids)}
+        d = np.linalg.norm(pos[:, None] - pos[None], axis=2)
+        checks = self._checks
+        # contacts: close pairs, and the members of this step's merges and splits
+        close = np.argwhere(np.triu(d < p.d_contact_m, 1))
+        contacts = {(min(int(ids[i]), int(ids[j])), max(int(ids[i]), int(ids[j]))): False for i, j in close}
+        for e in self.events:
+            if e.kind in ("merge", "split"):
+                for a, b in itertools.combinations(sorted(e.track_ids), 2):
+                    if a in row and b in row:
+                        contacts[(a, b)] = contacts.get((a, b), False) or e.kind == "split"
+        for pair, split in contacts.items():
+            dist = float(d[row[pair[0]], row[pair[1]]])
+            c = checks.get(pair)
+            if c is None:
+                checks[pair] = _Check(t_ns, dist, t_ns, split)
+                continue
+            if split:  # an exchange, if any, most likely happened at the (last) split
+                c.swap_from_ns, c.split_seen = t_ns, True
+            elif dist < c.closest_m and not c.split_seen:
+                c.swap_from_ns = t_ns
+            c.closest_m = min(c.closest_m, dist)
+        for pair in list(checks):
+            a, b = pair
+            if a not in row or b not in row:  # one of them has ended: nothing to check
+                del checks[pair]
+                continue
+            if d[row[a], row[b]] < p.d_train_m:
+                checks[pair].near_ns = t_ns
+            elif t_ns - checks[pair].near_ns > p.check_s * 1e9:
+                del checks[pair]
+        if not checks:
+            return states
+        t_img = self.frames.nearest_time(t_ns)
+        if t_img is None:
+            return states
+        walking = np.array([st.situation != _MERGED for st in states])
+        todo = [pair for pair, c in checks.items() if c.image_ns != t_img and walking[row[pair[0]]]
+                and walking[row[pair[1]]] and (self.bank.is_trained(pair[0]) or self.bank.is_trained(pair[1]))]
+        if not todo:
+            return states
+        t0 = time.perf_counter()
+        boxes = self._boxes(pos)
+        ok = np.isfinite(boxes).all(axis=1)
+        occluded = _occlusion(boxes, ok)  # (n,) largest fraction of each box inside another box
+        todo = [pair for pair in todo if ok[row[pair[0]]] and ok[row[pair[1]]]
+                and occluded[row[pair[0]]] <= p.max_overlap and occluded[row[pair[1]]] <= p.max_overlap]
+        img = self._image(t_ns) if todo else None
+        exchanged = []
+        if img is not None:
+            for pair in todo:
+                c = checks[pair]
+                trained = [tid for tid in pair if self.bank.is_trained(tid)]
+                sc = self.bank.box_scores(img.pixels, boxes[[row[pair[0]], row[pair[1]]]], trained)  # (2, n_tr)
+                own = np.array([pair.index(tid) for tid in trained])
+                ev = sc[own, np.arange(len(trained))] - sc[1 - own, np.arange(len(trained))]
+                if not np.isfinite(ev).all():
+                    continue
+                self._used.update(pair)
+                c.evidence += float(ev.mean())
+                c.n += 1
+                c.image_ns = t_img
+                mean = c.evidence / c.n
+                if c.n >= p.check_frames and abs(mean) >= p.check_margin:
+                    del checks[pair]
+                    self.stats.checks += 1
+                    if mean < 0:
+                        exchanged.append((pair, c, mean))
+        for (a, b), c, mean in exchanged:
+            self._exchange(a, b, c.swap_from_ns, t_ns, mean)
+        self.stats.camera_s += time.perf_counter() - t0
+        if not exchanged:
+            return states
+        swap: dict[int, int] = {}
+        for (a, b), _, _ in exchanged:
+            sa, sb = swap.get(a, a), swap.get(b, b)
+            swap[a], swap[b] = sb, sa
+        return [dataclasses.replace(st, track_id=swap[st.track_id]) if st.track_id in swap else st for st in states]
+
+    def _exchange(self, a: int, b: int, from_ns: int, t_ns: int, evidence: float) -> None:
+        """The laser tracks ``a`` and ``b`` follow each other's person: exchange their ids from now on and
+        record the exchange since ``from_ns`` (:attr:`relabels`)."""
+        laser = self.laser
+        ia, ib = np.flatnonzero(laser._id == a), np.flatnonzero(laser._id == b)
+        if ia.size != 1 or ib.size != 1:
+            return
+        laser._id[ia[0]], laser._id[ib[0]] = b, a
+        runs = laser._corr
+        ra, rb = runs.pop(a, None), runs.pop(b, None)
+        if ra is not None:
+            runs[b] = ra
+        if rb is not None:
+            runs[a] = rb
+        for pair, c in self._checks.items():  # evidence gathered under the old ids no longer holds
+            if a in pair or b in pair:
+                c.evidence, c.n = 0.0, 0
+        self.relabels.append(Relabel(int(from_ns), int(t_ns), int(a), int(b)))
+        self.stats.exchanges += 1
+        self.events.append(Event(t_ns, self.camera_name, "identity", t_ns, track_ids=(a, b),
+                                 attributes={"exchanged": True, "from_ns": int(from_ns), "evidence": evidence}))
 
     # ---------------------------------------------------------------------------------------------
     def _score_map_ll(self, t_ns: int, track_ids: np.ndarray, centres_m: np.ndarray) -> np.ndarray | None:
@@ -356,10 +593,8 @@ class FusionTracker:
         scores = None
         if np.isfinite(boxes).all():
             s = self.bank.box_scores(img.pixels, boxes, member_ids)
-            if np.isfinite(s).all():
+            if np.isfinite(s).all() and _assignment_gap(s) >= self.params.split_margin:
                 scores = s
-                if s.shape == (2, 2) and abs((s[0, 0] + s[1, 1]) - (s[0, 1] + s[1, 0])) < self.params.split_margin:
-                    scores = None
         if scores is not None:
             self._used.update(member_ids)
         self.stats.camera_s += time.perf_counter() - t0
@@ -421,7 +656,10 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
     Returns
     -------
     states : list of TrackState
+        With the identity checks' exchanges applied (:func:`relabel_states`).
     events : list of Event
+        The laser tracker's, plus one ``identity`` event (``track_ids`` = the pair, ``attributes``: ``from_ns``,
+        ``evidence``) per exchange; earlier merge/split events keep the ids of their time.
     stats : FusionStats
 
     Raises
@@ -467,4 +705,4 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
                              clock_corrections_ns={k: v for k, v in corrections.items() if k != cam_sensor})
         states, events = run_tracker(trk, detector, poses, stream, total=total, auto_area=auto_area,
                                      classify=classify, progress=progress, timings=timings)
-    return states, events, trk.stats
+    return relabel_states(states, trk.relabels), events, trk.stats
