@@ -153,6 +153,16 @@ def test_lights_off_failures_are_detected_and_recovered(scene):
         centre = 0.5 * (v.box_px[window, :2] + v.box_px[window, 2:])
         truth_box = np.array([boxes[(int(t), carriers[phone])] for t in v.t_ns[window]])
         inside.append(np.all((centre >= truth_box[:, :2]) & (centre <= truth_box[:, 2:]), axis=1))
+        # the criterion: within 1 s of the lights coming back the box overlaps the person's truth box at
+        # IoU >= 0.5 on 3 consecutive frames
+        back = (v.t_ns >= on) & (v.t_ns <= on + 1e9)
+        tb = np.array([boxes.get((int(t), carriers[phone]), [np.nan] * 4) for t in v.t_ns[back]])
+        b = v.box_px[back]
+        iw = np.clip(np.minimum(b[:, 2], tb[:, 2]) - np.maximum(b[:, 0], tb[:, 0]), 0, None)
+        ih = np.clip(np.minimum(b[:, 3], tb[:, 3]) - np.maximum(b[:, 1], tb[:, 1]), 0, None)
+        union = np.prod(b[:, 2:] - b[:, :2], axis=1) + np.prod(tb[:, 2:] - tb[:, :2], axis=1) - iw * ih
+        on_target = np.nan_to_num(iw * ih / union) >= 0.5
+        assert np.any(np.convolve(on_target, np.ones(3), "valid") >= 3), (phone, np.round(iw * ih / union, 2))
     assert tracked >= 1
     assert n_fail >= 1  # the change of lighting is detected ...
     assert n_recovered >= 1  # ... and tracking recovers from it
