@@ -765,6 +765,36 @@ class LaserPeopleTracker:
         out, self.events = self.events, []
         return out
 
+    def exchange_ids(self, a: int, b: int) -> bool:
+        """Swap the ids of two live targets from now on (e.g. an identity check found them exchanged).
+
+        Walking targets' ids, merged members' ids, open correlated runs and the keys of held-back splits follow
+        the swap; events already emitted keep the ids of their time. Returns False (nothing changed) unless
+        ``a`` and ``b`` are two distinct live targets.
+        """
+        a, b = int(a), int(b)
+        if a == b:
+            return False
+        walking = {a: np.flatnonzero(self._id == a), b: np.flatnonzero(self._id == b)}
+        members = {tid: [info for m in self._merged for info in m.info if info.track_id == tid] for tid in (a, b)}
+        if any(walking[tid].size + len(members[tid]) != 1 for tid in (a, b)):
+            return False
+        swap = {a: b, b: a}
+        rows_a, rows_b = walking[a], walking[b]
+        self._id[rows_a], self._id[rows_b] = b, a
+        for tid in (a, b):
+            for info in members[tid]:
+                info.track_id = swap[tid]
+        runs = self._corr
+        ra, rb = runs.pop(a, None), runs.pop(b, None)
+        if ra is not None:
+            runs[b] = ra
+        if rb is not None:
+            runs[a] = rb
+        if self._held_splits:
+            self._held_splits = {frozenset(swap.get(t, t) for t in key): ev for key, ev in self._held_splits.items()}
+        return True
+
     # ---------------------------------------------------------------------------------------------
     def _predict(self, dt: float) -> None:
         p = self.params
