@@ -2,26 +2,30 @@
 
 One group of two differently dressed people (``groups`` with one group and no single walkers, 20 s, seed 2)
 meet, walk side by side as one laser segment and split. Truth is the simulator's: its floor positions say who
-is where, its situation events say when the two merge and split.
+is where, its situation events say when the two merge and split. A short ``crowd`` whose camera is turned 3
+degrees from its calibration checks the pipeline's own bias correction against the simulator's truth boxes, and
+a recording without a camera that the pipeline falls back to the lasers.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import logging
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from fusiontrack.eval import evaluate_floor
-from fusiontrack.fusion import FusionParams, FusionTracker, LazyFrames, track_fused
+from fusiontrack.fusion import FusionParams, FusionTracker, LazyFrames, Relabel, relabel_states, track_fused
 from fusiontrack.geometry import PinholeCamera
 from fusiontrack.io.recording import Recording
 from fusiontrack.sim.scenario import load_scenario
 from fusiontrack.sim.simulator import Simulation, simulate
 from fusiontrack.sim.situations import situation_events
-from fusiontrack.tracking.tracker import track_recording
-from fusiontrack.types import Detection
+from fusiontrack.tracking.tracker import LaserPeopleTracker, track_recording
+from fusiontrack.types import Detection, GroundTruth
 
 SIM_PF = {"lateral_m": 0.2}  # the simulator's feet are 0.2 m apart side by side
 
@@ -56,7 +60,7 @@ def test_merge_and_split_of_two_differently_dressed_people_keeps_both_identities
     assert merges
     assert splits
     assert set(merges[0].track_ids) == set(splits[0].track_ids)
-    states, events, stats = track_fused(pair["path"], tracker_params=SIM_PF, **pair["kw"])
+    states, events, stats = track_fused(pair["path"], tracker_params=SIM_PF, adaptive_bias=False, **pair["kw"])
     agents = sorted(merges[0].track_ids)
     before = [_track_at(states, pair["gt"], a, merges[0].t_ns - 300_000_000) for a in agents]
     assert None not in before
@@ -102,7 +106,8 @@ def test_camera_blackout_leaves_laser_tracking_intact_and_learning_resumes(pair)
         wrappers.append(_Blackout(frames, t0, t1))
         return wrappers[-1]
 
-    states, _, stats = track_fused(pair["path"], tracker_params=SIM_PF, frames_wrapper=blackout, **pair["kw"])
+    states, _, stats = track_fused(pair["path"], tracker_params=SIM_PF, frames_wrapper=blackout, adaptive_bias=False,
+                                   **pair["kw"])
     laser, _ = track_recording(pair["path"], params=SIM_PF, **pair["kw"])
     read = np.array(wrappers[0].read)
     assert not ((read >= t0) & (read <= t1)).any()  # no image was read during the blackout
@@ -155,7 +160,6 @@ def test_fusion_tracker_without_interaction_never_reads_the_camera():
 
 
 def test_relabel_states_swaps_only_inside_each_window_in_decision_order():
-    from fusiontrack.fusion.tracker import Relabel, relabel_states
     from fusiontrack.types import TrackState
 
     states = [TrackState(t, "laser", tid, np.array([float(tid), 0.0]), np.zeros(2))
@@ -207,7 +211,8 @@ def test_identity_check_undoes_an_exchange_the_laser_made_at_a_split(pair, monke
 
     monkeypatch.setattr(LaserPeopleTracker, "step", step)
     params = FusionParams(split_identity=False)
-    states, events, stats = track_fused(pair["path"], params=params, tracker_params=SIM_PF, **pair["kw"])
+    states, events, stats = track_fused(pair["path"], params=params, tracker_params=SIM_PF, adaptive_bias=False,
+                                        **pair["kw"])
     assert injected
     assert stats.exchanges >= 1
     exchanged = [e for e in events if e.kind == "identity"]
@@ -221,3 +226,146 @@ def test_identity_check_undoes_an_exchange_the_laser_made_at_a_split(pair, monke
     for split in (e for e in pair["truth"] if e.kind == "split"):
         after = [_track_at(states, pair["gt"], a, split.t_ns + 1_000_000_000) for a in agents]
         assert after == before, (split.t_ns, before, after)
+
+
+# --------------------------------------------------------------------------------------------------
+# The camera's horizontal bias, learnt by the pipeline itself
+# --------------------------------------------------------------------------------------------------
+
+YAW_ERROR_DEG = 3.0
+
+
+@pytest.fixture(scope="module")
+def crowd(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    """14 s of ``crowd`` whose camera is turned 3 degrees from its calibration, tracked by the people pipeline."""
+    scenario = load_scenario("crowd").with_overrides(seconds=14, seed=0,
+                                                     settings={"cameras.0.yaw_bias_deg": YAW_ERROR_DEG})
+    path: Path = tmp_path_factory.mktemp("fusion_bias") / "crowd"
+    simulate(scenario, path)
+    with Recording(path) as rec:
+        gt = [g for g in rec.messages(["/ground_truth"]) if isinstance(g, GroundTruth)]
+        boxes = [g for g in rec.messages(["/ground_truth/camera_0"]) if isinstance(g, GroundTruth)]
+    used: list = []
+    orig = FusionTracker.__init__
+
+    def spy(self, camera, *args, **kw):  # the camera the tracker fuses through
+        used.append(camera)
+        orig(self, camera, *args, **kw)
+
+    corrections = {c.name: -round(c.clock_offset_ms * 1e6) for c in scenario.config.lasers}
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(FusionTracker, "__init__", spy)
+        states, events, stats = track_fused(path, tracker_params=SIM_PF, area_m=Simulation(scenario).world.bounds_m,
+                                            clock_corrections_ns=corrections)
+    return {"gt": gt, "boxes": boxes, "states": states, "events": events, "stats": stats, "used": used}
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    lo, hi = np.maximum(a[:, :2], b[:, :2]), np.minimum(a[:, 2:], b[:, 2:])
+    inter = np.clip(hi - lo, 0, None).prod(axis=1)
+    return inter / ((a[:, 2:] - a[:, :2]).prod(axis=1) + (b[:, 2:] - b[:, :2]).prod(axis=1) - inter)
+
+
+def _truth_box_pairs(crowd: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Floor positions of the tracked people (matched to an agent within 0.3 m) and that agent's true image box
+    (simulator, fully visible), over the whole run."""
+    gt_t = np.array([g.t_ns for g in crowd["gt"]])
+    box_t = np.array([g.t_ns for g in crowd["boxes"]])
+    pos, true_box = [], []
+    for s in crowd["states"][::5]:
+        g = crowd["gt"][int(np.argmin(np.abs(gt_t - s.t_ns)))]
+        d = np.linalg.norm(g.positions_m - s.position_m, axis=1)
+        if not d.size or d.min() > 0.3:
+            continue
+        k = int(np.argmin(np.abs(box_t - s.t_ns)))
+        if abs(box_t[k] - s.t_ns) > 40_000_000:
+            continue
+        fb = crowd["boxes"][k]
+        hit = np.flatnonzero(fb.ids == g.ids[np.argmin(d)])
+        if not hit.size:
+            continue
+        box = np.asarray(fb.attributes["box_px"], float)[hit[0]]
+        if np.asarray(fb.attributes["visibility"], float)[hit[0]] < 0.99 or not np.isfinite(box).all():
+            continue
+        pos.append(s.position_m)
+        true_box.append(box)
+    return np.array(pos), np.array(true_box)
+
+
+def test_people_pipeline_learns_the_camera_bias_and_fuses_through_the_corrected_camera(crowd):
+    stats = crowd["stats"]
+    bias = stats.bias
+    assert stats.camera == "camera_0"
+    assert bias is not None
+    assert bias.settled
+    assert math.degrees(bias.bias_rad) == pytest.approx(YAW_ERROR_DEG, abs=0.2)  # the simulator's yaw error
+    assert len(bias.history) < 14 * 15  # it stopped reading the camera for the bias once settled
+    assert len(crowd["used"]) == 1
+    assert crowd["used"][0] is bias.corrected_camera
+    ev = [e for e in crowd["events"] if e.kind == "camera_bias"]
+    assert len(ev) == 1
+    assert ev[0].attributes["bias_deg"] == pytest.approx(math.degrees(bias.bias_rad))
+    # the projected boxes of the tracked people land on the people (the simulator's boxes) once corrected
+    pos, true_box = _truth_box_pairs(crowd)
+    assert len(pos) > 100
+    params = FusionParams()
+    iou = {name: _iou(cam.person_box(pos, params.height_m, params.width_ratio), true_box)
+           for name, cam in (("calibrated", bias.camera), ("corrected", bias.corrected_camera))}
+    assert np.median(iou["corrected"]) > 0.5
+    assert np.median(iou["corrected"]) > np.median(iou["calibrated"]) + 0.3
+
+
+def test_recording_without_camera_is_tracked_with_the_lasers_alone(tmp_path, caplog):
+    scenario = load_scenario("groups").with_overrides(seconds=8, seed=2, settings={
+        "agents.n_groups": 1, "agents.n_singles": 0, "cameras": []})
+    path = tmp_path / "no_camera"
+    simulate(scenario, path)
+    with Recording(path) as rec:
+        gt = list(rec.messages(["/ground_truth"]))
+        assert not any("image" in t for t in rec.topics())
+    with caplog.at_level(logging.WARNING, logger="fusiontrack.fusion.tracker"):
+        states, _, stats = track_fused(path, tracker_params=SIM_PF, area_m=Simulation(scenario).world.bounds_m)
+    assert "lasers only" in caplog.text
+    assert stats.camera == ""
+    assert stats.bias is None
+    assert stats.frames_used == 0
+    assert states
+    assert all(s.sensors == ("laser",) for s in states)
+    assert evaluate_floor(gt, states, 0.5).mota > 0.5
+
+
+def _standing(t_ns: int, xs: tuple[float, ...]) -> list[Detection]:
+    """Detections of people standing at ``(x, 0)``, feet 0.2 m apart."""
+    dets = []
+    for x in xs:
+        feet = np.array([[x, -0.1], [x, 0.1]])
+        dets.append(Detection(t_ns, "laser", position_m=feet.mean(axis=0), features={
+            "feet_m": feet, "inter_feet_m": np.asarray(0.2), "one_foot": np.asarray(False)}))
+    return dets
+
+
+def test_exchange_ids_swaps_two_tracks_from_then_on():
+    trk = LaserPeopleTracker({"n_confirm": 2, "n_confirm_interior": 2}, rng=0)
+    t = 1_000_000_000
+    for k in range(20):
+        states = trk.step(t + k * 40_000_000, _standing(t + k * 40_000_000, (-2.0, 2.0)))
+    who = {round(float(s.position_m[0])): s.track_id for s in states}
+    assert sorted(who) == [-2, 2]
+    a, b = who[-2], who[2]
+    trk._corr[a] = [t, t, np.zeros(2)]  # an open correlated run of a: it follows the id
+    assert trk.exchange_ids(a, b)
+    assert trk._corr.keys() == {b}
+    states = trk.step(t + 20 * 40_000_000, _standing(t + 20 * 40_000_000, (-2.0, 2.0)))
+    assert {round(float(s.position_m[0])): s.track_id for s in states} == {-2: b, 2: a}
+    # nothing to swap: the same id, or an id that is not live
+    assert not trk.exchange_ids(a, a)
+    assert not trk.exchange_ids(a, 999)
+    assert {int(i) for i in trk._id} == {a, b}
+    # a member of a merged target (hand-built) swaps with a walking target
+    from fusiontrack.tracking.tracker import _MemberInfo, _Merged
+
+    members = [_MemberInfo(50, 1.1, 0.6, 0.0, True, t, False), _MemberInfo(51, 1.1, 0.6, 0.0, True, t, False)]
+    trk._merged.append(_Merged(np.zeros(4), np.eye(4), t, np.zeros((2, 2)), np.zeros((2, 2)), members))
+    assert trk.exchange_ids(a, 50)
+    assert {int(i) for i in trk._id} == {50, b}
+    assert trk._merged[0].ids == [a, 51]

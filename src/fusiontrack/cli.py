@@ -358,6 +358,10 @@ def track(
     camera_topic: Annotated[str | None, typer.Option(help="people-camera, people: the recording's image topic "
                                                      "(default: its only one).")] = None,
     max_frames: Annotated[int | None, typer.Option(help="people-camera: stop after this many frames.")] = None,
+    camera_bias: Annotated[bool, typer.Option(help="people: first learn the camera's horizontal bias against the "
+                                              "lasers (seed 000; over the first seconds, until it settles) and fuse "
+                                              "through the corrected camera; writes bias.csv. --no-camera-bias for "
+                                              "a camera calibrated well.")] = True,
     geometry: Annotated[Path | None, typer.Option(help="traffic: road geometry TOML (roads, lanes, zones); default "
                                                   "the simulator's ground_truth/world.json beside the recording."
                                                   )] = None,
@@ -425,11 +429,24 @@ def track(
 
             if tracker_kind != "pf":
                 raise ConfigError(f"--tracker: the people pipeline uses the pf tracker, got {tracker_kind!r}")
-            states, events, _ = track_fused(
+            states, events, fstats = track_fused(
                 recordings, tracker_params=cfg.tracking or None, camera_topic=camera_topic, topics=topics,
                 time_source=time_source, clock_corrections_ns=cfg.clock_corrections_ns(),
                 detector_params=cfg.laser or None, rng=seed, area_m=area_m, timings=timings,
-                progress=lambda f: bar.update(task, completed=f))
+                adaptive_bias=camera_bias, progress=lambda f: bar.update(task, completed=f))
+            if not fstats.camera:
+                console.print("[yellow]no usable camera: people tracked with the lasers only[/yellow]")
+            elif fstats.bias is not None:
+                import math
+
+                from .calibration.bias_run import write_bias_history
+
+                output.mkdir(parents=True, exist_ok=True)
+                write_bias_history(output / "bias.csv", fstats.bias.history)
+                b = fstats.bias
+                state = ("settled" if b.settled else "not settled") + ("" if b.applied else ", not applied")
+                console.print(f"{fstats.camera} horizontal bias {math.degrees(b.bias_rad):.3f} deg ({b.updates} "
+                              f"updates, {state}; {b.seconds:.1f} s) -> {output / 'bias.csv'}")
         else:
             states, events = track_recording(
                 recordings, tracker=tracker_kind, params=cfg.tracking or None, topics=topics,

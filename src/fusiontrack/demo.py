@@ -76,7 +76,7 @@ def people_comparison(recording: str | Path, output: str | Path, *, camera: str 
                                                      overlay=output / "camera_overlay.mp4")
     times["camera only"] = time.perf_counter() - tic
     tic = time.perf_counter()
-    runs["fusion"], _, fstats = track_fused(recording, camera=corrected)
+    runs["fusion"], _, fstats = track_fused(recording, camera=corrected, adaptive_bias=False)  # learnt above
     times["fusion"] = time.perf_counter() - tic
 
     metrics = {k: evaluate_floor(truth, v, threshold_m=0.5) for k, v in runs.items()}

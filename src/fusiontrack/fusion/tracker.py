@@ -33,7 +33,11 @@ The camera image is converted only when one of these needs it (:class:`~fusiontr
 so with no interaction the fused tracker costs what the laser one costs. Each output state names the sensors
 that confirmed its step: the laser's, plus the camera's when the image was used for that target.
 
-:func:`track_fused` runs it over a recording (laser scans + one camera).
+:func:`track_fused` runs it over a recording (laser scans + one camera). The boxes are only as good as the camera's
+calibration: a yaw error of 3 degrees puts them beside the people 10 m away, and the classifiers learn the wrong
+pixels. So it first learns the camera's horizontal bias against the lasers over the beginning of the recording
+(seed 000, :func:`learn_camera_bias`, until the bias settles: a few seconds) and fuses through the corrected
+camera; without a usable camera it tracks with the lasers alone.
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import logging
+import math
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -49,13 +54,15 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from ..calibration.bias import BiasHistory, BiasParams
 from ..errors import ConfigError, RecordingError
 from ..geometry import PinholeCamera
 from ..tracking.tracker import LaserPeopleTracker, TrackerParams, run_tracker
 from ..types import Detection, Event, Image, Situation, TrackState
 from ..vision.appearance import AppearanceBank, AppearanceParams
 
-__all__ = ["FrameSource", "FusionParams", "FusionStats", "FusionTracker", "Relabel", "relabel_states", "track_fused"]
+__all__ = ["BiasLearning", "CameraBias", "FrameSource", "FusionParams", "FusionStats", "FusionTracker", "Relabel",
+           "learn_camera_bias", "relabel_states", "track_fused"]
 
 log = logging.getLogger(__name__)
 
@@ -153,6 +160,92 @@ class FusionParams:
             raise ConfigError("FusionParams.height_m, width_ratio: expected values > 0")
 
 
+@dataclass(frozen=True, slots=True)
+class BiasLearning:
+    """How :func:`track_fused` learns its camera's horizontal bias before fusing (seed 000, ALGORITHMS.md A10).
+
+    The bias is learnt over the beginning of the recording only: every camera image goes through seed 000's
+    vision path (A1–A5) while it learns, which costs more than the fused tracker itself, and a fixed camera's
+    error does not change within a recording. Learning stops once the bias has settled, or after ``max_s``;
+    a bias that has not settled by then is applied only if it stands out from its own wander (at least
+    ``settle_updates`` updates, and larger than twice the span of the last ``settle_updates`` values) [RECON]:
+    with two people always side by side, the bias wanders by a degree on wrong matches.
+
+    Attributes
+    ----------
+    params : BiasParams
+        A6–A10 (``rho`` 0.1: settles in about 40 updates, A12).
+    min_updates : int
+        Updates (frames whose objects moved the bias) before the bias may be called settled [RECON].
+    settle_updates : int
+        It has settled when its last ``settle_updates`` values span at most ``tol_deg`` [RECON].
+    tol_deg : float
+        See ``settle_updates`` (0.1 degrees: about the wander of the settled bias, ``benchmarks/bias.py``).
+    max_s : float
+        Learning stops this long after the first camera frame even if not settled [RECON].
+    """
+
+    params: BiasParams = field(default_factory=BiasParams)
+    min_updates: int = 40
+    settle_updates: int = 20
+    tol_deg: float = 0.1
+    max_s: float = 12.0
+
+    def __post_init__(self) -> None:
+        for name in ("min_updates", "settle_updates"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ConfigError(f"BiasLearning.{name}: expected an integer >= 1, got {v!r}")
+        for name in ("tol_deg", "max_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
+                raise ConfigError(f"BiasLearning.{name}: expected a finite value > 0, got {v!r}")
+        if not isinstance(self.params, BiasParams):
+            raise ConfigError(f"BiasLearning.params: expected BiasParams, got {type(self.params).__name__}")
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class CameraBias:
+    """The horizontal bias learnt by :func:`learn_camera_bias`.
+
+    Attributes
+    ----------
+    history : BiasHistory
+        The bias after every camera frame read (its CSV: :func:`~fusiontrack.calibration.bias_run.
+        write_bias_history`).
+    camera : PinholeCamera
+        The camera as calibrated.
+    corrected_camera : PinholeCamera
+        ``camera`` turned by the final bias if ``applied``, else ``camera``: what the fused tracker uses.
+    settled : bool
+        Learning stopped because the bias had settled (else: end of ``max_s`` or of the recording).
+    spread_rad : float
+        Span of the bias over its last ``settle_updates`` updates (NaN with fewer).
+    applied : bool
+        The bias corrects the camera: settled, or standing out from its spread (:class:`BiasLearning`).
+    seconds : float
+        Processing time of the learning.
+    """
+
+    history: BiasHistory
+    camera: PinholeCamera
+    corrected_camera: PinholeCamera
+    settled: bool
+    spread_rad: float
+    applied: bool
+    seconds: float
+
+    @property
+    def bias_rad(self) -> float:
+        """The final bias (0 without any update)."""
+        return float(self.history.bias_rad[-1]) if len(self.history) else 0.0
+
+    @property
+    def updates(self) -> int:
+        """Frames whose objects moved the bias."""
+        return int(np.count_nonzero(self.history.n_used))
+
+
 @dataclass(slots=True)
 class FusionStats:
     """What the camera was used for during a run."""
@@ -168,6 +261,18 @@ class FusionStats:
     checks: int = 0  # identity checks decided
     exchanges: int = 0  # ... that exchanged the identities of a pair
     camera_s: float = 0.0  # time spent on the camera side (reading, learning, scoring)
+    camera: str = ""  # the camera fused ("": none, the lasers alone)
+    bias: CameraBias | None = None  # the camera's horizontal bias learnt before fusing (None: not learnt)
+
+
+class _NoFrames:
+    """The frame source of a tracker without a camera: never an image."""
+
+    def nearest_time(self, t_ns: int) -> int | None:
+        return None
+
+    def at(self, t_ns: int) -> Image | None:
+        return None
 
 
 def _assignment_gap(scores: np.ndarray) -> float:
@@ -255,10 +360,10 @@ class FusionTracker:
 
     Parameters
     ----------
-    camera : PinholeCamera
-        The calibrated camera (world frame, B11).
-    frames : FrameSource
-        Its images by time.
+    camera : PinholeCamera or None
+        The calibrated camera (world frame, B11); None: no camera, the laser tracker alone.
+    frames : FrameSource or None
+        Its images by time (None: none).
     params : FusionParams, optional
     tracker_params : TrackerParams or mapping, optional
         Of the laser tracker.
@@ -276,12 +381,12 @@ class FusionTracker:
     stats : FusionStats
     """
 
-    def __init__(self, camera: PinholeCamera, frames: FrameSource, params: FusionParams | None = None,
+    def __init__(self, camera: PinholeCamera | None, frames: FrameSource | None, params: FusionParams | None = None,
                  tracker_params: TrackerParams | Mapping[str, Any] | None = None, *, area_m: Any = None,
                  rng: np.random.Generator | int | None = None, camera_name: str = "camera") -> None:
         self.params = p = params or FusionParams()
         self.camera = camera
-        self.frames = frames
+        self.frames: FrameSource = frames if frames is not None and camera is not None else _NoFrames()
         self.camera_name = camera_name
         r_laser, r_bank = np.random.default_rng(rng).spawn(2)
         self.bank = AppearanceBank(p.appearance, rng=r_bank)
@@ -339,7 +444,9 @@ class FusionTracker:
         return img
 
     def _boxes(self, positions_m: np.ndarray) -> np.ndarray:
-        """B11 person boxes ``(n, 4)`` of floor positions ``(n, 2)``; NaN rows behind the camera."""
+        """B11 person boxes ``(n, 4)`` of floor positions ``(n, 2)``; NaN rows behind the camera (or without one)."""
+        if self.camera is None:
+            return np.full((len(positions_m), 4), np.nan)
         return self.camera.person_box(positions_m, self.params.height_m, self.params.width_ratio)
 
     def _box_centres(self, positions_m: np.ndarray) -> np.ndarray:
@@ -509,17 +616,8 @@ class FusionTracker:
     def _exchange(self, a: int, b: int, from_ns: int, t_ns: int, evidence: float) -> None:
         """The laser tracks ``a`` and ``b`` follow each other's person: exchange their ids from now on and
         record the exchange since ``from_ns`` (:attr:`relabels`)."""
-        laser = self.laser
-        ia, ib = np.flatnonzero(laser._id == a), np.flatnonzero(laser._id == b)
-        if ia.size != 1 or ib.size != 1:
+        if not self.laser.exchange_ids(a, b):
             return
-        laser._id[ia[0]], laser._id[ib[0]] = b, a
-        runs = laser._corr
-        ra, rb = runs.pop(a, None), runs.pop(b, None)
-        if ra is not None:
-            runs[b] = ra
-        if rb is not None:
-            runs[a] = rb
         for pair, c in self._checks.items():  # evidence gathered under the old ids no longer holds
             if a in pair or b in pair:
                 c.evidence, c.n = 0.0, 0
@@ -606,7 +704,8 @@ class FusionTracker:
 # --------------------------------------------------------------------------------------------------
 
 
-def _image_topic(rec: Any, camera_topic: str | None) -> str:
+def _image_topic(rec: Any, camera_topic: str | None) -> str | None:
+    """The image topic to fuse: ``camera_topic``, else the recording's only camera image topic, else None."""
     topics = rec.topics()
     if camera_topic is not None:
         if camera_topic not in topics:
@@ -614,16 +713,87 @@ def _image_topic(rec: Any, camera_topic: str | None) -> str:
         return camera_topic
     found = [t for t, i in topics.items() if i.msgtype in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
              and not t.endswith(("/labels", "/depth")) and "depth" not in t.split("/")[-1]]
-    if not found:
-        raise RecordingError(f"{rec.paths[0]}: no image topic for the people pipeline (laser + camera)")
     if len(found) > 1:
         raise ConfigError(f"{rec.paths[0]}: several image topics ({', '.join(found)}); choose one with camera_topic")
-    return found[0]
+    return found[0] if found else None
+
+
+def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCamera | None = None,
+                      lasers: Mapping[str, Any] | None = None, learning: BiasLearning | None = None,
+                      clock_corrections_ns: Mapping[str, int] | None = None, world_frame: str = "world",
+                      ) -> CameraBias:
+    """Learn a camera's horizontal bias against the lasers over the beginning of a recording (seed 000, A0–A10).
+
+    Like :func:`~fusiontrack.calibration.bias_run.bias_from_recording`, but stops as soon as the bias has
+    settled (:class:`BiasLearning`), so that only the first seconds of the camera go through seed 000's vision
+    path.
+
+    Parameters
+    ----------
+    path : str or Path
+        The recording.
+    camera_name : str
+        Sensor name of the camera (its ``sensor_msgs/Image`` topic and ``CameraInfo`` are used).
+    camera : PinholeCamera, optional
+        The camera as calibrated (default: the recording's, ``<camera>_calibrated`` preferred).
+    lasers : mapping of laser name -> (4, 4) laser2world, optional
+        Default: every laser of the recording, posed by ``/tf_static``.
+    learning : BiasLearning, optional
+    clock_corrections_ns : mapping of sensor -> int, optional
+        Added to each sensor's stamps (as for :func:`track_fused`).
+    world_frame : str
+
+    Returns
+    -------
+    CameraBias
+        With no update (nobody seen by both), or an unsettled bias within its wander, the corrected camera is
+        ``camera``.
+
+    Raises
+    ------
+    RecordingError
+        The recording lacks the camera's images or CameraInfo, the lasers or their poses.
+    """
+    from ..calibration.bias_run import open_bias_inputs
+    from ..types import LaserScan
+
+    lp = learning or BiasLearning()
+    offsets_ms = {k: -v / 1e6 for k, v in (clock_corrections_ns or {}).items()}
+    inputs = open_bias_inputs(path, camera_name, None if lasers is None else list(lasers),
+                              clock_offsets_ms=offsets_ms, world_frame=world_frame,
+                              cam2world=None if camera is None else camera.cam2world, laser2world=lasers)
+    if camera is not None:
+        inputs = dataclasses.replace(inputs, camera=camera)
+    est = inputs.estimator(lp.params)
+    tic = time.perf_counter()
+    tol = np.radians(lp.tol_deg)
+    learnt: list[float] = []
+    first_ns: int | None = None
+    settled = False
+    for item in inputs:
+        if isinstance(item, LaserScan):
+            est.observe_scan(item)
+            continue
+        step = item.update(est)
+        first_ns = step.t_ns if first_ns is None else first_ns
+        if step.n_used:
+            learnt.append(step.bias_rad)
+            recent = learnt[-lp.settle_updates:]
+            if len(learnt) >= max(lp.min_updates, lp.settle_updates) and max(recent) - min(recent) <= tol:
+                settled = True
+                break
+        if step.t_ns - first_ns >= lp.max_s * 1e9:
+            break
+    spread = float(np.ptp(learnt[-lp.settle_updates:])) if len(learnt) >= lp.settle_updates else math.nan
+    applied = settled or (np.isfinite(spread) and abs(est.bias_rad) > 2.0 * spread)
+    return CameraBias(est.history, est.camera, est.corrected_camera if applied else est.camera, settled, spread,
+                      bool(applied), time.perf_counter() - tic)
 
 
 def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams | None = None,
                 tracker_params: TrackerParams | Mapping[str, Any] | None = None,
                 camera_topic: str | None = None, camera: PinholeCamera | None = None,
+                adaptive_bias: bool | BiasLearning | BiasParams = True,
                 progress: Callable[[float], None] | None = None, topics: Iterable[str] | None = None,
                 time_source: str = "header", area_m: Any = "auto",
                 clock_corrections_ns: Mapping[str, int] | None = None,
@@ -634,22 +804,29 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
     """Track the people of a recording with its laser scans and one camera (seed 001's fused pipeline).
 
     Like :func:`~fusiontrack.tracking.tracker.track_recording` (same detector, synchronisation, area and
-    classification), with a :class:`FusionTracker` stepped once per scan time.
+    classification), with a :class:`FusionTracker` stepped once per scan time. First, unless
+    ``adaptive_bias`` is False, the camera's horizontal bias is learnt against the lasers over the beginning of
+    the recording (seed 000, :func:`learn_camera_bias`), and the tracker fuses through the corrected camera.
 
     Parameters
     ----------
     path : recording path(s)
+        With several files, the bias is learnt from the first one.
     params : FusionParams, optional
     tracker_params : TrackerParams or mapping, optional
     camera_topic : str, optional
         The image topic (default: the recording's only one; labels and depth images are not candidates).
     camera : PinholeCamera, optional
         Default: from the recording's CameraInfo and ``/tf_static`` (``<frame>_calibrated`` preferred,
-        :func:`~fusiontrack.vision.people.camera_from_recording`).
+        :func:`~fusiontrack.vision.people.camera_from_recording`). The bias corrects this camera.
+    adaptive_bias : bool, BiasLearning or BiasParams
+        Learn the camera's bias first (True: :class:`BiasLearning` defaults); False for a camera calibrated
+        well. The result is :attr:`FusionStats.bias` and a ``camera_bias`` event.
     progress, topics, time_source, area_m, clock_corrections_ns, detector_params, rng, world_frame, classify
         As for ``track_recording``; ``clock_corrections_ns`` may also name the camera.
     timings : dict, optional
-        Filled with per-step ``"detect_s"`` and ``"track_s"`` (laser tracker + camera side + classification).
+        Filled with per-step ``"detect_s"`` and ``"track_s"`` (laser tracker + camera side + classification),
+        and ``"bias_s"`` (one value: the bias learning).
     frames_wrapper : callable, optional
         Wraps the camera's :class:`~fusiontrack.fusion.frames.LazyFrames` (e.g. to simulate a blackout).
 
@@ -659,13 +836,17 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         With the identity checks' exchanges applied (:func:`relabel_states`).
     events : list of Event
         The laser tracker's, plus one ``identity`` event (``track_ids`` = the pair, ``attributes``: ``from_ns``,
-        ``evidence``) per exchange; earlier merge/split events keep the ids of their time.
+        ``evidence``) per exchange; earlier merge/split events keep the ids of their time. With a learnt bias,
+        first one ``camera_bias`` event over the frames it was learnt on (``attributes``: ``bias_deg``,
+        ``updates``, ``settled``, ``applied``).
     stats : FusionStats
+        ``stats.camera`` is "" when the recording has no usable camera: the lasers tracked alone (a warning
+        says why). ``stats.bias``: the learnt bias and its history.
 
     Raises
     ------
     RecordingError
-        No laser or image topic, or no calibrated camera.
+        No laser topic.
     """
     from ..io.recording import LASERSCAN, Recording
     from ..io.sync import synchronize
@@ -673,36 +854,89 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
     from ..vision.people import camera_from_recording
     from .frames import LazyFrames
 
+    if isinstance(adaptive_bias, BiasParams):
+        learning: BiasLearning | None = BiasLearning(params=adaptive_bias)
+    elif isinstance(adaptive_bias, BiasLearning):
+        learning = adaptive_bias
+    elif isinstance(adaptive_bias, bool):
+        learning = BiasLearning() if adaptive_bias else None
+    else:
+        raise ConfigError(f"adaptive_bias: expected a bool, BiasLearning or BiasParams, got {adaptive_bias!r}")
     corrections = dict(clock_corrections_ns or {})
+    first_path = path if isinstance(path, str | Path) else next(iter(path), None)
     with Recording(path) as rec, Recording(path) as cam_rec:
         info = rec.topics()
         lasers = [t for t, i in info.items() if i.msgtype == LASERSCAN] if topics is None else list(topics)
         if not lasers:
             raise RecordingError(f"{path}: no sensor_msgs/LaserScan topic to track")
         image_topic = _image_topic(rec, camera_topic)
-        cam_sensor = rec.sensor_of(image_topic)
-        if camera is None:
+        cam_sensor = "" if image_topic is None else rec.sensor_of(image_topic)
+        if image_topic is None:
+            log.warning("%s: no camera image topic: the people pipeline tracks with the lasers only", path)
+        elif camera is None:
             first = next((m for m in rec.messages([image_topic]) if isinstance(m, Image)), None)
-            if first is None:
-                raise RecordingError(f"{path}: image topic {image_topic} holds no readable image")
-            camera = camera_from_recording(rec, cam_sensor, first.frame_id, world_frame=world_frame)
+            if first is not None:
+                camera = camera_from_recording(rec, cam_sensor, first.frame_id, world_frame=world_frame)
             if camera is None:
-                raise RecordingError(f"{path}: no CameraInfo or no /tf_static pose for camera {cam_sensor!r}: the "
-                                     "people pipeline needs a calibrated camera (use people-laser without one)")
+                log.warning("%s: %s for camera %r: the people pipeline tracks with the lasers only", path,
+                            "no readable image" if first is None else "no CameraInfo or no /tf_static pose",
+                            cam_sensor)
+        if image_topic is None or camera is None:
+            camera, cam_sensor = None, ""
         p = params or FusionParams()
-        frames: Any = LazyFrames(cam_rec, image_topic, round(p.max_frame_dt_s * 1e9), corrections.get(cam_sensor, 0))
-        if frames_wrapper is not None:
-            frames = frames_wrapper(frames)
         total = sum(info[t].count for t in lasers if t in info)
         detector, poses = detector_for_recording(rec, lasers, time_source=time_source, world_frame=world_frame,
                                                  background="learn", detector_params=detector_params)
+        bias = None
+        if camera is not None and learning is not None and first_path is not None:
+            bias = _learn_bias(first_path, cam_sensor, camera, poses, learning, corrections, world_frame)
+            if bias is not None:
+                camera = bias.corrected_camera
+                if timings is not None:
+                    timings.setdefault("bias_s", []).append(bias.seconds)
+        frames: Any = None
+        if camera is not None:
+            frames = LazyFrames(cam_rec, image_topic, round(p.max_frame_dt_s * 1e9), corrections.get(cam_sensor, 0))
+            if frames_wrapper is not None:
+                frames = frames_wrapper(frames)
         auto_area = isinstance(area_m, str)
         if auto_area and area_m != "auto":
             raise ConfigError(f"area_m: expected 'auto', None, a rectangle or a polygon, got {area_m!r}")
         trk = FusionTracker(camera, frames, p, tracker_params, area_m=None if auto_area else area_m, rng=rng,
-                            camera_name=cam_sensor)
+                            camera_name=cam_sensor or "camera")
+        trk.stats.camera, trk.stats.bias = cam_sensor, bias
         stream = synchronize(rec.messages(lasers, time_source=time_source),
                              clock_corrections_ns={k: v for k, v in corrections.items() if k != cam_sensor})
         states, events = run_tracker(trk, detector, poses, stream, total=total, auto_area=auto_area,
                                      classify=classify, progress=progress, timings=timings)
+    if bias is not None and len(bias.history):
+        h = bias.history
+        events.insert(0, Event(int(h.t_ns[0]), cam_sensor, "camera_bias", int(h.t_ns[-1]), attributes={
+            "bias_deg": float(np.degrees(bias.bias_rad)), "updates": bias.updates, "settled": bias.settled,
+            "applied": bias.applied}))
     return relabel_states(states, trk.relabels), events, trk.stats
+
+
+def _learn_bias(path: str | Path, cam_sensor: str, camera: PinholeCamera, poses: Mapping[str, np.ndarray],
+                learning: BiasLearning, corrections: Mapping[str, int], world_frame: str) -> CameraBias | None:
+    """:func:`learn_camera_bias` for :func:`track_fused`: None (with a warning) when it cannot be learnt."""
+    try:
+        bias = learn_camera_bias(path, cam_sensor, camera=camera, lasers=poses, learning=learning,
+                                 clock_corrections_ns=corrections, world_frame=world_frame)
+    except (RecordingError, ValueError) as err:  # no usable calibration or images: fuse as calibrated
+        log.warning("camera bias not learnt (%s): the camera is used as calibrated", err)
+        return None
+    seconds = (bias.history.t_ns[-1] - bias.history.t_ns[0]) / 1e9 if len(bias.history) else 0.0
+    if bias.updates == 0:
+        log.warning("%s: camera bias not learnt: nobody was seen by both %s and the lasers in %.1f s; the camera "
+                    "is used as calibrated", path, cam_sensor, seconds)
+    elif not bias.settled:
+        spread = np.degrees(bias.spread_rad)
+        wander = f"wandering by {spread:.2f}" if np.isfinite(spread) else "too few updates"
+        log.warning("%s: the bias of %s had not settled after %d updates (%.1f s): %.3f deg, %s; %s", path, cam_sensor,
+                    bias.updates, seconds, np.degrees(bias.bias_rad), wander,
+                    "applied" if bias.applied else "the camera is used as calibrated")
+    else:
+        log.info("%s: bias of %s settled at %.3f deg after %d updates (%.1f s)", path, cam_sensor,
+                 np.degrees(bias.bias_rad), bias.updates, seconds)
+    return bias
