@@ -387,6 +387,8 @@ def track(
     if pipeline != "traffic" and any(traffic_only.values()):
         given = ", ".join(k for k, v in traffic_only.items() if v)
         raise ConfigError(f"{given}: only for --pipeline traffic (got --pipeline {pipeline})")
+    if not camera_bias and pipeline != "people":
+        raise ConfigError(f"--no-camera-bias: only for --pipeline people (got --pipeline {pipeline})")
     if pipeline == "wearable":
         _track_wearable(recordings, output, config=config, seed=seed)
         return
