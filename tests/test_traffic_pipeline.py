@@ -49,7 +49,9 @@ def test_fused_particle_filter_tracks_the_simulated_vehicles(road, run):
     m = scores["fusion_pf"]
     assert m.recall >= 0.8
     assert m.precision >= 0.8
-    assert m.id_switches <= 1
+    # one or two: with the default laser_every = 2 the PF swaps two ids late in this 16 s clip (none with every
+    # scan); on benchmarks/traffic.py (3 x 60 s) laser_every = 2 has fewer switches (9 against 16)
+    assert m.id_switches <= 2
     # issue 8: fusion + particle filter is the best of the four on MOTA
     assert m.mota == max(s.mota for s in scores.values()), {v: round(s.mota, 3) for v, s in scores.items()}
     assert set(run.sensors) == {"laser_0", "laser_1", "camera_0", "camera_1"}
@@ -63,16 +65,15 @@ def test_time_is_measured_per_part_by_the_clock_and_the_cpu(run):
     assert 0 < run.speed_x_real_time(cpu=True) < np.inf
 
 
-def test_every_camera_frame_or_every_second_one(road, run):
-    """The default ``camera_every = 2`` gives each camera's branch half of its frames (about half the camera
-    detections of ``camera_every = 1``, the lasers' untouched); both follow the simulated vehicles."""
+def test_every_frame_and_scan_or_every_second_one(road, run):
+    """The defaults ``camera_every = 2`` and ``laser_every = 2`` give each branch half of its sensor's messages
+    (about half the detections of ``camera_every = laser_every = 1``); both follow the simulated vehicles."""
     path, gt = road
     assert TrafficParams().camera_every == 2
-    res = track_traffic(path, params=TrafficParams(camera_every=1), variants=("fusion_pf",))
-    for cam in ("camera_0", "camera_1"):
-        assert 0.35 * res.detections[cam] <= run.detections[cam] <= 0.65 * res.detections[cam]
-    for las in ("laser_0", "laser_1"):
-        assert res.detections[las] == run.detections[las]
+    assert TrafficParams().laser_every == 2
+    res = track_traffic(path, params=TrafficParams(camera_every=1, laser_every=1), variants=("fusion_pf",))
+    for sensor in ("camera_0", "camera_1", "laser_0", "laser_1"):
+        assert 0.35 * res.detections[sensor] <= run.detections[sensor] <= 0.65 * res.detections[sensor]
     m = evaluate_vehicles(*_after_warm_up(gt, res.states["fusion_pf"]), area=AREA, rate_hz=15)
     assert m.recall >= 0.8
     assert m.precision >= 0.8

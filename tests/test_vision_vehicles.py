@@ -458,3 +458,37 @@ def test_image_records_are_accepted():
     assert det(grey) == []
     with pytest.raises(ValueError, match="size"):
         det(np.full((240, 320, 3), 100, np.uint8), t_ns=T0 + 2 * DT_NS)
+
+
+def test_fast_outline_percentiles_equal_numpy_bit_for_bit():
+    from fusiontrack.vision.vehicles import _p5_p95
+
+    rng = np.random.default_rng(3)
+    for n in [*range(1, 40), 97, 400]:
+        x = rng.normal(size=(n, 2)) * 10.0 ** rng.uniform(-3, 3)
+        assert np.array_equal(_p5_p95(x), np.percentile(x, [5, 95], axis=0))
+        assert np.array_equal(_p5_p95(x[:, 0]), np.percentile(x[:, 0], [5, 95]))
+
+
+@pytest.mark.parametrize("n_specks", [5, 200])
+def test_blob_statistics_from_labels_equal_a4(n_specks):
+    """The camera branch measures its blobs from the label image (no OpenCV statistics): the same boxes, areas,
+    centroids and labels as A4's extract_blobs, specks below the minimum area dropped but kept in the labels."""
+    from fusiontrack.vision.blobs import BlobParams, clean_mask, extract_blobs
+    from fusiontrack.vision.vehicles import _blobs_of_labels
+
+    rng = np.random.default_rng(n_specks)
+    mask = np.zeros((240, 320), bool)
+    for _ in range(6):
+        v, u, h, w = rng.integers(0, 200), rng.integers(0, 280), rng.integers(8, 40), rng.integers(8, 40)
+        mask[v:v + h, u:u + w] = True
+    mask[rng.integers(0, 240, n_specks), rng.integers(0, 320, n_specks)] = True
+    params = BlobParams(open_px=1, close_px=1, min_area_px=16)
+    ref = extract_blobs(mask, params)
+    _, labels = cv2.connectedComponentsWithAlgorithm(clean_mask(mask, params), 8, cv2.CV_32S, cv2.CCL_GRANA)
+    got = _blobs_of_labels(labels, 16)
+    assert np.array_equal(got.label_image, ref.label_image)
+    assert np.array_equal(got.component_ids, ref.component_ids)
+    assert np.array_equal(got.boxes_px, ref.boxes_px)
+    assert np.array_equal(got.areas_px, ref.areas_px)
+    np.testing.assert_allclose(got.centroids_px, ref.centroids_px, atol=1e-9)

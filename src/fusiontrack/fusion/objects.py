@@ -79,12 +79,23 @@ def _length(det: Detection) -> float:
 
 
 class _Cluster:
-    __slots__ = ("members",)
+    __slots__ = ("_fused", "members")
 
     def __init__(self, det: Detection) -> None:
         self.members = [det]
+        self._fused: tuple[np.ndarray, np.ndarray] | None = None
+
+    def add(self, det: Detection) -> None:
+        self.members.append(det)
+        self._fused = None
 
     def position(self) -> tuple[np.ndarray, np.ndarray]:
+        """Information-weighted mean of the members' positions and its covariance (kept until a member joins)."""
+        if self._fused is None:
+            self._fused = self._position()
+        return self._fused
+
+    def _position(self) -> tuple[np.ndarray, np.ndarray]:
         info = np.zeros((2, 2))
         vec = np.zeros(2)
         for d in self.members:
@@ -131,7 +142,7 @@ def fuse_objects(per_sensor: dict[str, Sequence[Detection]], params: ObjectFusio
         cost_gated = np.where(near, np.sqrt(m2) + p.size_penalty * np.nan_to_num(dl, nan=0.0), np.inf)
         pairs, _, free = hungarian(cost_gated, gate=np.inf)
         for a, b in pairs:
-            clusters[a].members.append(dets[b])
+            clusters[a].add(dets[b])
         clusters.extend(_Cluster(dets[b]) for b in free)
     return [_object(c, p) for c in clusters]
 

@@ -184,18 +184,22 @@ class VehicleModeTracker:
         self.x[..., 0:2] += self.x[..., 2:4] * dt + noise[..., 0:2] * (self.p.sigma_p_m * s)
         self.x[..., 2:4] += noise[..., 2:4] * (self.p.sigma_v_mps * s)
 
-    def _match(self, objs: Sequence[FusedObject]) -> tuple[np.ndarray, np.ndarray]:
-        """Hungarian modes -> objects on the Eq. 6 negative log-likelihood; returns (mode idx, object idx)."""
+    def _match(self, objs: Sequence[FusedObject]
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """Hungarian modes -> objects on the Eq. 6 negative log-likelihood; returns (mode idx, object idx) and, for
+        S2, the colour distances ``(n_modes, n_objects)`` and the position variances ``(n_objects,)`` it used."""
         n, k = self.ids.size, len(objs)
         if not n or not k:
-            return np.zeros(0, np.intp), np.zeros(0, np.intp)
+            return np.zeros(0, np.intp), np.zeros(0, np.intp), None, None
         pos = np.array([o.position_m for o in objs])
         d = np.linalg.norm(self.centres()[:, None, 0:2] - pos[None], axis=2)
-        m2 = d**2 / self._pos_var(objs)[None]
-        cost = 0.5 * m2 + 0.5 * (self._colour_dist(objs) / self.p.sigma_col) ** 2
+        var = self._pos_var(objs)
+        dcol = self._colour_dist(objs)
+        m2 = d**2 / var[None]
+        cost = 0.5 * m2 + 0.5 * (dcol / self.p.sigma_col) ** 2
         cost[(d > self.p.gate_m) & (m2 > 9.0)] = np.inf  # an imprecise object may be 3 σ away (as in S0)
         pairs, _, _ = hungarian(cost, gate=np.inf)
-        return pairs[:, 0], pairs[:, 1]
+        return pairs[:, 0], pairs[:, 1], dcol, var
 
     def _pos_var(self, objs: Sequence[FusedObject]) -> np.ndarray:
         """Per object, ``σ_pos² + ½ tr Σ_obj``: the position term of Eq. 6 widened by the object's own uncertainty."""
@@ -232,16 +236,16 @@ class VehicleModeTracker:
         self._t = t_ns
         p = self.p
         self._predict(dt)                                                             # S1
-        mi, oi = self._match(objects)
+        mi, oi, dcol_all, var_all = self._match(objects)
         n = self.ids.size
         lik = np.zeros(n)
         matched = np.zeros(n, bool)
         if mi.size:                                                                   # S2
             pos = np.array([objects[j].position_m for j in oi])
-            dcol = self._colour_dist(objects)[mi, oi]
+            dcol = dcol_all[mi, oi]
             d2 = ((self.x[mi, :, 0:2] - pos[:, None, :]) ** 2).sum(axis=2)
             col = np.exp(-0.5 * (dcol / p.sigma_col) ** 2)
-            var = self._pos_var(objects)[oi]
+            var = var_all[oi]
             w_pos = np.exp(-0.5 * d2 / var[:, None])
             w = w_pos * col[:, None]
             lik[mi] = w_pos.mean(axis=1)  # deletion and colour update: the position term (two cameras see a car
