@@ -288,3 +288,29 @@ def test_cli_track_wearable_writes_each_phone_s_results(scene, tmp_path):
                         "-c", str(bad), "-o", str(out)], capture_output=True, text=True, timeout=120)
     assert r.returncode == 2
     assert "no_such_option" in r.stderr
+
+
+def test_person_blob_takes_the_person_not_a_bystander():
+    # hand-built boxes: a 200 px tall person predicted at u = 300..340 (0.4 x 1.75 m wide box), feet at row 300
+    from fusiontrack.fusion.wearable_visual import VisualParams, _person_blob
+
+    class Camera:
+        size = (640, 480)
+
+    p = VisualParams()
+    pred = np.array([300.0, 100.0, 340.0, 300.0])
+    none = np.zeros((0, 4))
+    own = np.array([[305.0, 104.0, 333.0, 299.0]])
+    bystander = np.array([[322.0, 102.0, 360.0, 299.0]])  # a person without a phone 21 px (~0.37 m) to the side
+    ct_box = np.array([305.0, 100.0, 345.0, 300.0])  # the tracker's box covers both centres
+    assert np.array_equal(_person_blob(Camera, own, pred, none, p, near=ct_box), own[0])
+    assert _person_blob(Camera, bystander, pred, none, p, near=ct_box) is None
+    both = np.vstack([bystander, own])
+    assert np.array_equal(_person_blob(Camera, both, pred, none, p, near=ct_box), own[0])
+    # two people side by side in one blob (wider than a person can be), or another carrier's predicted box on it
+    assert _person_blob(Camera, np.array([[290.0, 104.0, 460.0, 299.0]]), pred, none, p, near=ct_box) is None
+    assert _person_blob(Camera, own, pred, np.array([[310.0, 100.0, 350.0, 300.0]]), p, near=ct_box) is None
+    # a blob whose feet are not where the person stands (another depth), or the head lost: extended up
+    assert _person_blob(Camera, own - np.array([0.0, 60.0, 0.0, 60.0]), pred, none, p, near=ct_box) is None
+    short = np.array([[305.0, 170.0, 333.0, 299.0]])
+    assert np.allclose(_person_blob(Camera, short, pred, none, p, near=ct_box), [305.0, 99.0, 333.0, 299.0])
