@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from fusiontrack.sim.model import KIND_PERSON, AgentSnapshot
-from fusiontrack.sim.situations import label_situations, situation_counts, situation_events
+from fusiontrack.sim.situations import drop_undone_splits, label_situations, situation_counts, situation_events
 from fusiontrack.types import GroundTruth, Situation
 
 BOUNDS = (-10.0, -10.0, 10.0, 10.0)
@@ -171,3 +171,50 @@ def test_bad_input_names_the_parameter() -> None:
     with pytest.raises(ValueError, match="increasing"):
         label_situations(_pair(1.0)[::-1], BOUNDS)
     assert label_situations([], BOUNDS) == []
+
+
+def _flicker() -> list[AgentSnapshot]:
+    """1 and 2 side by side: 1.0 m apart (frames 0-4), 0.5 m (merged, 5-14), 0.65 m (correlated, 15-16),
+    0.5 m again (17-26), then 1.0 m (27-34): by the centre distance, merge 5, split 15, merge 17, split 27."""
+    sep = [1.0] * 5 + [0.5] * 10 + [0.65] * 2 + [0.5] * 10 + [1.0] * 8
+    return [_snap(k, [1, 2], [[0.0, 0.0], [d, 0.0]]) for k, d in enumerate(sep)]
+
+
+def test_split_hold_drops_a_split_undone_by_a_re_merge() -> None:
+    def merges_splits(events):
+        return [(e.kind, e.t_ns) for e in events if e.kind in ("merge", "split")]
+
+    raw = merges_splits(situation_events(_flicker(), BOUNDS))
+    assert raw == [("merge", 5 * DT_NS), ("split", 15 * DT_NS), ("merge", 17 * DT_NS), ("split", 27 * DT_NS)]
+    # 0.2 s apart (10 Hz frames): a hold of 0.3 s drops the split at 15 and the merge at 17, 0.1 s keeps them
+    held = situation_events(_flicker(), BOUNDS, split_hold_s=0.3)
+    assert merges_splits(held) == [("merge", 5 * DT_NS), ("split", 27 * DT_NS)]
+    assert merges_splits(situation_events(_flicker(), BOUNDS, split_hold_s=0.1)) == raw
+    # the same rule on any event list (e.g. a tracker's): same result
+    assert merges_splits(drop_undone_splits(situation_events(_flicker(), BOUNDS), 0.3)) == merges_splits(held)
+    with pytest.raises(ValueError, match="hold_s"):
+        drop_undone_splits([], -1.0)
+
+
+def test_correlated_gap_bridging_and_minimum_length() -> None:
+    # 1 and 2: correlated (0.7 m) frames 0-3, apart (2 m) 4-5, correlated 6-9, apart 10-20, correlated 21
+    sep = [0.7] * 4 + [2.0] * 2 + [0.7] * 4 + [2.0] * 11 + [0.7]
+    frames = [_snap(k, [1, 2], [[0.0, 0.0], [d, 0.0]]) for k, d in enumerate(sep)]
+
+    def runs(**kw):
+        return sorted((e.t_ns // DT_NS, e.t_end_ns // DT_NS) for e in situation_events(frames, BOUNDS, **kw)
+                      if e.kind == "correlated" and e.track_ids == (1,))
+
+    assert runs() == [(0, 3), (6, 9), (21, 21)]
+    assert runs(correlated_gap_s=0.3) == [(0, 9), (21, 21)]  # the 0.3 s gap (last 3 -> next 6) is bridged
+    assert runs(correlated_gap_s=0.25) == [(0, 3), (6, 9), (21, 21)]
+    assert runs(correlated_gap_s=0.3, min_correlated_s=0.1) == [(0, 9)]
+
+
+def test_a_merge_ends_a_correlated_run_even_within_the_gap() -> None:
+    # correlated 0-2, merged 3, correlated 4-6: two runs whatever the gap allowance (the tracker closes at a merge)
+    sep = [0.7] * 3 + [0.4] + [0.7] * 3
+    frames = [_snap(k, [1, 2], [[0.0, 0.0], [d, 0.0]]) for k, d in enumerate(sep)]
+    corr = sorted((e.t_ns // DT_NS, e.t_end_ns // DT_NS) for e in situation_events(frames, BOUNDS, correlated_gap_s=1.0)
+                  if e.kind == "correlated" and e.track_ids == (1,))
+    assert corr == [(0, 2), (4, 6)]

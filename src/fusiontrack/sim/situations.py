@@ -64,6 +64,8 @@ __all__ = [
     "EVENT_MERGE",
     "EVENT_SPLIT",
     "SITUATION_DTYPE",
+    "TRUTH_PERSISTENCE",
+    "drop_undone_splits",
     "label_situations",
     "situation_counts",
     "situation_events",
@@ -75,6 +77,12 @@ SITUATION_DTYPE = np.dtype("<U16")
 EVENT_MERGE, EVENT_SPLIT, EVENT_CORRELATED, EVENT_APPEAR, EVENT_DISAPPEAR = (
     "merge", "split", "correlated", "appear", "disappear")
 EVENT_KINDS = (EVENT_MERGE, EVENT_SPLIT, EVENT_CORRELATED, EVENT_APPEAR, EVENT_DISAPPEAR)
+
+TRUTH_PERSISTENCE = {"split_hold_s": 0.5, "correlated_gap_s": 0.4}
+"""The persistence rules benchmarks/laser_people.py applies to both sides in its second situation table:
+``correlated_gap_s`` is the tracker's own default; ``split_hold_s = 0.5 s`` is applied to the truth here and
+to the tracker's events with :func:`drop_undone_splits` (groups walk ~0.5-0.6 m apart, at ``d_merged``, and
+both their one/two-segment look and their centre distance cross it back and forth)."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -122,10 +130,25 @@ def label_situations(frames: Sequence[Any], bounds_m: Any, *, d_correlated: floa
 
 
 def situation_events(frames: Sequence[Any], bounds_m: Any, *, d_correlated: float = 0.8, d_merged: float = 0.6,
-                     edge_m: float = 0.5, appear_window_s: float = 1.0, sensor: str = "ground_truth") -> list[Event]:
+                     edge_m: float = 0.5, appear_window_s: float = 1.0, sensor: str = "ground_truth",
+                     split_hold_s: float = 0.0, correlated_gap_s: float = 0.0,
+                     min_correlated_s: float = 0.0) -> list[Event]:
     """Seed 001's situation events (Table II's true counts) from the ground truth, in time order.
 
-    Same parameters as :func:`label_situations`, plus ``sensor`` (written into each event).
+    Same parameters as :func:`label_situations`, plus ``sensor`` (written into each event) and three
+    optional persistence rules, all off (0) by default. They are the rules the laser tracker applies to
+    its own events (:class:`~fusiontrack.tracking.tracker.TrackerParams` fields of the same names), so that
+    truth and detections count the same thing when two people walk at the ``d_merged`` spacing and the
+    centre distance crosses it back and forth (:data:`TRUTH_PERSISTENCE` holds the benchmark's values):
+
+    ``split_hold_s``
+        A split followed, within this time, by a merge of exactly the same people is no split: both
+        events are dropped (the people never were apart long enough to be two segments for a while).
+    ``correlated_gap_s``
+        Gaps up to this long in an agent's run of correlated frames are bridged (one episode), unless the
+        agent is merged in the gap (a merge ends the run).
+    ``min_correlated_s``
+        Correlated episodes (after bridging) shorter than this (last frame - first frame) make no event.
 
     Events (``t_ns`` = the frame where it happens; ``track_ids`` sorted agent ids):
 
@@ -179,23 +202,32 @@ def situation_events(frames: Sequence[Any], bounds_m: Any, *, d_correlated: floa
                 centre = np.mean([pos_frame[i] for i in present], axis=0) if present else None
                 events.append(Event(t_ns=t, sensor=sensor, kind=kind, t_end_ns=t, position_m=centre,
                                     track_ids=tuple(members), attributes={"parts": parts}))
+    if split_hold_s > 0:
+        events = drop_undone_splits(events, split_hold_s)
 
     # correlated episodes, per agent
     runs: dict[int, tuple[int, int, set[int], np.ndarray, int]] = {}  # id -> (start, last, partners, pos, k)
+    gap_ns, min_ns = round(correlated_gap_s * 1e9), round(min_correlated_s * 1e9)
     for k in range(a.t_ns.size):
         t = int(a.t_ns[k])
+        listed = set(a.ids[k].tolist())
+        for agent in [i for i in runs if i not in listed]:  # not listed (left the area): the run ends
+            _close_run(events, agent, runs.pop(agent), sensor, min_ns)
         for j, agent in enumerate(a.ids[k].tolist()):
-            is_correlated = a.labels[k][j] == Situation.CORRELATED
             run = runs.get(agent)
-            if run is not None and (not is_correlated or run[4] != k - 1):  # the run ended (or a gap)
-                events.append(_correlated_event(agent, runs.pop(agent), sensor))
+            ended = run is not None and run[4] != k - 1 and t - run[1] > gap_ns  # a gap too long to bridge
+            if a.labels[k][j] != Situation.CORRELATED:  # a merge always ends the run (as in the tracker)
+                if ended or (run is not None and (gap_ns == 0 or a.labels[k][j] == Situation.MERGED)):
+                    _close_run(events, agent, runs.pop(agent), sensor, min_ns)
+                continue
+            if ended:
+                _close_run(events, agent, runs.pop(agent), sensor, min_ns)
                 run = None
-            if is_correlated:
-                partners = set(a.partners[k][j].tolist())
-                runs[agent] = ((t, t, partners, a.positions[k][j], k) if run is None
-                               else (run[0], t, run[2] | partners, run[3], k))
+            partners = set(a.partners[k][j].tolist())
+            runs[agent] = ((t, t, partners, a.positions[k][j], k) if run is None
+                           else (run[0], t, run[2] | partners, run[3], k))
     for agent, run in runs.items():
-        events.append(_correlated_event(agent, run, sensor))
+        _close_run(events, agent, run, sensor, min_ns)
 
     # appear / disappear
     window_ns = round(appear_window_s * 1e9)
@@ -225,6 +257,36 @@ def situation_counts(events: Sequence[Event]) -> dict[str, int]:
 
 
 # ---- internals -----------------------------------------------------------------------------------
+
+
+def _close_run(events: list[Event], agent: int, run: tuple[int, int, set[int], np.ndarray, int], sensor: str,
+               min_ns: int) -> None:
+    if run[1] - run[0] >= min_ns:
+        events.append(_correlated_event(agent, run, sensor))
+
+
+def drop_undone_splits(events: Sequence[Event], hold_s: float) -> list[Event]:
+    """Drop each ``split`` that a ``merge`` of exactly the same ``track_ids`` follows within ``hold_s``, and that
+    merge (the ``split_hold_s`` rule of :func:`situation_events` and of the laser tracker; any source of events).
+
+    Returns the other events, sorted by time (stable).
+    """
+    if not hold_s >= 0:
+        raise ValueError(f"hold_s: expected a value >= 0, got {hold_s!r}")
+    hold_ns = round(hold_s * 1e9)
+    events = sorted(events, key=lambda e: e.t_ns)
+    dropped: set[int] = set()
+    for i, e in enumerate(events):
+        if e.kind != EVENT_SPLIT or i in dropped:
+            continue
+        for q in range(i + 1, len(events)):
+            f = events[q]
+            if f.t_ns - e.t_ns > hold_ns:
+                break
+            if q not in dropped and f.kind == EVENT_MERGE and f.track_ids == e.track_ids:
+                dropped.update((i, q))
+                break
+    return [e for i, e in enumerate(events) if i not in dropped]
 
 
 def _correlated_event(agent: int, run: tuple[int, int, set[int], np.ndarray, int], sensor: str) -> Event:
