@@ -492,3 +492,64 @@ def test_blob_statistics_from_labels_equal_a4(n_specks):
     assert np.array_equal(got.boxes_px, ref.boxes_px)
     assert np.array_equal(got.areas_px, ref.areas_px)
     np.testing.assert_allclose(got.centroids_px, ref.centroids_px, atol=1e-9)
+
+
+# --------------------------------------------------------------------------------------------------
+# The processed window (crop_to_road): tall vehicles and A1's illumination test
+# --------------------------------------------------------------------------------------------------
+
+
+def test_window_holds_a_four_metre_tall_vehicle_standing_on_the_road():
+    """A truck or bus (4 m tall, 10 m long) standing anywhere on the road, seen whole, lies inside the window: its
+    eight corners projected by the true camera."""
+    cam = pole_camera()
+    u0, v0, u1, v1 = detector_for(cam).window(640, 480)
+    n = 0
+    L, W, Hh = 10.0, 2.5, 4.0
+    dx, dy, dz = np.meshgrid([-L / 2, L / 2], [-W / 2, W / 2], [0.0, Hh])
+    for x in np.arange(-55.0, 56.0, 2.5):
+        for y in (-5.25, -1.75, 1.75, 5.25):  # the four lane centres
+            uv = cam.project(np.column_stack([x + dx.ravel(), y + dy.ravel(), dz.ravel()]))
+            if not (np.all(np.isfinite(uv)) and np.all(uv >= -0.5) and np.all(uv <= [639.5, 479.5])):
+                continue  # not seen whole
+            n += 1
+            assert np.all(uv.min(axis=0) + 0.5 >= [u0, v0]), (x, y)
+            assert np.all(uv.max(axis=0) + 0.5 <= [u1, v1]), (x, y)
+    assert n > 40
+
+
+def test_illumination_test_looks_at_the_whole_frame_not_the_window():
+    """A1 relearns when more than 60 % of the *frame* is foreground. A vehicle filling 70 % of the processed window
+    (about a third of the frame) is no illumination change; the light dropping to 0.6x over the whole frame is."""
+    rng = np.random.default_rng(3)
+    cam = pole_camera()
+    background = cv2.GaussianBlur(np.clip(rng.normal(110, 12, (480, 640, 3)), 0, 255).astype(np.uint8), (0, 0), 1.0)
+    det = detector_for(cam)
+    u0, v0, u1, v1 = det.window(640, 480)
+    win_px = (u1 - u0) * (v1 - v0)
+    assert win_px < 0.6 * 640 * 480  # the window is about half of the frame
+    top = v1 - int(np.ceil(0.7 * (v1 - v0)))  # a near vehicle (or a queue) covering the window's lower 70 %
+    assert (v1 - top) * (u1 - u0) / win_px > 0.65
+    assert (v1 - top) * (u1 - u0) < 0.4 * 640 * 480
+
+    def noisy(img):
+        return np.clip(img + rng.normal(0, 2.0, img.shape), 0, 255).astype(np.uint8)
+
+    t = T0
+    for _ in range(60):
+        det(noisy(background), t_ns=t)
+        t += DT_NS
+    big = background.copy()
+    big[top:v1, u0:u1] = (40, 40, 170)
+    for _ in range(10):
+        det(noisy(big), t_ns=t)
+        t += DT_NS
+        assert det.last_foreground.foreground_fraction > 0.6  # of the window
+        assert not det.last_foreground.relearning
+    assert det.n_illumination_events == 0
+    for _ in range(10):  # it leaves; then the light drops over the whole frame
+        det(noisy(background), t_ns=t)
+        t += DT_NS
+    det(noisy((background * 0.6).astype(np.uint8)), t_ns=t)
+    assert det.last_foreground.relearning
+    assert det.n_illumination_events == 1

@@ -27,9 +27,13 @@ the ROAD frame (the contract of the D5 fusion):
   the road's image is not cut off; the minimum area is ``min_footprint_m2`` of road at the blob's
   bottom-centre in pixels (``1 / |det J|``, ``J`` the image-to-road Jacobian), at least ``min_area_px``.
   Only the image *window* that can hold such a vehicle is processed (:meth:`CameraVehicleDetector.window`: the
-  ROI's bounding rectangle grown by the image of every road point within 3 m more, lifted to 2.5 m; about half
+  ROI's bounding rectangle grown by the image of every road point within 3 m more, lifted to 4.2 m; about half
   of a 640 × 480 frame on the simulated road); A1-A4 and the road memory cost in proportion (17.7 → 10.3 ms of
-  CPU per frame on the simulated road, the same detections).
+  CPU per frame on the simulated road, the same detections). A1's illumination test (more than 60 % of the
+  frame foreground) keeps measuring the whole frame: a plain MoG on every 8th pixel of every 8th row (at 640 × 480)
+  gives the foreground fraction outside the window, and the window's model is told the window fraction at which the
+  frame's would pass 60 % (:meth:`CameraVehicleDetector._illumination_test`), so a large near vehicle or a queue
+  filling most of the window does not make it relearn (and absorb stopped vehicles) at 10α.
 * **Vehicles from blobs** [RECON]: pieces of one vehicle (a sill band under a body A3 lost) are joined when
   they lie inside the image of a car standing on the lowest piece's footprint
   (:meth:`CameraVehicleDetector._join_fragments`); a blob longer than 1.6 car lengths on the road (a queue
@@ -207,7 +211,9 @@ class VehicleDetectorParams:
     window_margin_m, window_height_m : float
         The window holds the road rectangles widened by ``road_margin_m + window_margin_m`` (3.0 m: half a car
         length beyond a contact point at the ROI's edge, and more) from the road up to ``window_height_m``
-        (2.5 m: the tallest class prior and more).
+        (4.2 m: a truck or bus of 3-4 m and more; the class priors, 1.5-1.7 m, are only what the detector
+        assumes of a vehicle it cannot see whole). The foreground model's illumination test still looks at the
+        whole frame (:meth:`CameraVehicleDetector._illumination_test`).
     background_every : int
         MOG2's background image, which the road memory veto compares against, is refreshed every this many
         frames (4: it changes at the rate α = 0.002 per frame), and at every frame while MoG relearns.
@@ -254,7 +260,7 @@ class VehicleDetectorParams:
     frame_dt_s: float = 1.0 / 15.0
     crop_to_road: bool = True
     window_margin_m: float = 3.0
-    window_height_m: float = 2.5
+    window_height_m: float = 4.2
     background_every: int = 4
     processing_scale: int = 1
 
@@ -766,6 +772,9 @@ class CameraVehicleDetector:
         self._P: np.ndarray | None = None
         self._P_for: tuple[int, int] | None = None
         self._fg = ForegroundModel(p.foreground)
+        self._fg_small: ForegroundModel | None = None  # the whole frame, shrunk: the illumination test's outside
+        self._small_size: tuple[int, int] = (0, 0)  # the frame size it samples
+        self._small_outside = np.zeros((0, 0), bool)
         sc = p.processing_scale
         self._min_area_small = max(1, -(-p.min_area_px // sc**2))
         self._blob_params = replace(p.blobs, min_area_px=self._min_area_small,
@@ -786,6 +795,11 @@ class CameraVehicleDetector:
         self.last_mask: np.ndarray | None = None
         self.n_frames = 0
         self.n_skipped = 0
+
+    @property
+    def n_illumination_events(self) -> int:
+        """Illumination changes the foreground model has relearned after (A1's 10α relearning started)."""
+        return self._fg.n_illumination_events
 
     # -- geometry -------------------------------------------------------------------------------------
 
@@ -961,6 +975,7 @@ class CameraVehicleDetector:
         sub = bgr[v0:v1, u0:u1]
         if sc > 1 and sub.dtype == np.uint8:
             sub = cv2.resize(sub, ((u1 - u0) // sc, (v1 - v0) // sc), interpolation=cv2.INTER_AREA)
+        self._illumination_test(bgr, (u0, v0, u1, v1))
         fg = self._fg.apply(sub)
         self.last_foreground = fg
         if not fg.valid:  # a black frame: the model is untouched; tracks coast by time at the next frame
@@ -976,6 +991,41 @@ class CameraVehicleDetector:
         blobs = _in_frame(blobs, (u0, v0), (h, w), sc)
         self.last_mask = blobs.label_image > 0
         return self._detect(t, dt, bgr, blobs)
+
+    def _illumination_test(self, bgr: np.ndarray, window: tuple[int, int, int, int]) -> None:
+        """A1's illumination test on the whole frame while only the window is modelled [RECON].
+
+        A1 relearns at 10α when more than ``illumination_fraction`` (60 %) of the *frame* is MoG foreground. The
+        window is about half the frame, so a large near vehicle or a queue in it would pass that share of the
+        window alone (and the relearning absorbs stopped vehicles). A plain MoG (A1, same parameters, no A2/A3,
+        its own illumination relearning) on every k-th pixel of every k-th row (k = 8 at 640 × 480: 80 samples
+        across; MoG decides each pixel on its own, so these are a whole-frame model's decisions there, and no
+        resampling is paid for) gives the foreground fraction ``f_o`` of the ``O`` pixels outside the window of
+        ``W`` pixels; the window's model is given the threshold ``(0.6 (W + O) − f_o O) / W`` (clipped to (0, 1]) on
+        its own fraction, which is A1's test on the frame's fraction ``(f_w W + f_o O) / (W + O)``. With no outside
+        (the whole image processed) the model keeps its own test.
+        """
+        base = self.params.foreground
+        h, w = bgr.shape[:2]
+        u0, v0, u1, v1 = window
+        n_win = (u1 - u0) * (v1 - v0)
+        n_out = w * h - n_win
+        if n_out <= 0 or n_win <= 0 or base.illumination_frames == 0:
+            return
+        step = max(1, round(max(w, h) / 80))
+        if self._fg_small is None or self._small_size != (w, h):
+            self._fg_small = ForegroundModel(replace(base, stopped=None, shadows=None))
+            self._small_size = (w, h)
+            uc, vc = np.arange(step // 2, w, step), np.arange(step // 2, h, step)  # the sampled pixels
+            self._small_outside = ~(((vc >= v0) & (vc < v1))[:, None] & ((uc >= u0) & (uc < u1))[None, :])
+        small = self._fg_small.apply(np.ascontiguousarray(bgr[step // 2::step, step // 2::step]))
+        outside = self._small_outside
+        f_out = (np.count_nonzero(small.mog_mask & outside) / max(1, np.count_nonzero(outside))) if small.valid \
+            else 0.0
+        thr = (base.illumination_fraction * (n_win + n_out) - f_out * n_out) / n_win
+        thr = float(np.clip(round(thr, 4), 1e-6, 1.0))
+        if thr != self._fg.params.illumination_fraction:
+            self._fg.params = replace(base, illumination_fraction=thr)
 
     def _background_image(self, relearning: bool) -> np.ndarray:
         """MOG2's background image, refreshed every ``background_every`` frames and while relearning."""
