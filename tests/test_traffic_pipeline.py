@@ -13,6 +13,7 @@ import pytest
 from fusiontrack.errors import ConfigError
 from fusiontrack.eval.events import read_incidents
 from fusiontrack.eval.vehicles import evaluate_vehicles
+from fusiontrack.fusion.objects import DetectionBuffer
 from fusiontrack.fusion.traffic import TrafficParams, roads_of, track_traffic
 from fusiontrack.io.recording import Recording
 from fusiontrack.sim.scenario import load_scenario
@@ -59,10 +60,86 @@ def test_fused_particle_filter_tracks_the_simulated_vehicles(road, run):
 
 
 def test_time_is_measured_per_part_by_the_clock_and_the_cpu(run):
-    parts = ("laser_branch", "camera_branch", "fusion_pf", "scene")
+    parts = ("read", "laser_branch", "camera_branch", "fusion_pf", "scene")
     assert all(run.timings_s[p] > 0 and run.cpu_s[p] > 0 for p in parts)
     assert set(run.cpu_s) == set(run.timings_s)
     assert 0 < run.speed_x_real_time(cpu=True) < np.inf
+
+
+def test_reading_the_recording_is_timed_and_counted_in_the_speed(run):
+    """Reading and decoding every message (the frames and scans a branch skips too) is a part of its own, and the
+    speed against real time is the recording's duration over the time of the parts a user waits for."""
+    assert run.timings_s["read"] > 0
+    assert run.cpu_s["read"] > 0
+    for cpu in (False, True):
+        spent = run.cpu_s if cpu else run.timings_s
+        total = sum(spent[p] for p in ("read", "laser_branch", "camera_branch", "fusion_pf", "scene"))
+        assert run.speed_x_real_time(cpu=cpu) == pytest.approx(run.duration_s / total)
+
+
+def test_a_sparse_camera_stays_in_the_fusion_between_its_frames(road):
+    """A 10 Hz camera (every third 15 Hz frame dropped) given every second frame (``camera_every = 2``) has a frame
+    every 0.2 s, older than the fusion's ``max_age_s`` (0.15 s) at some 15 Hz instants: its detections must take
+    part at every fusion instant after its first frame all the same."""
+    path, _ = road
+    with Recording(path) as rec:
+        t0 = rec.start_ns
+    seen: dict[str, int] = {}
+    first: dict[str, int] = {}
+
+    def ten_hz_cameras_only(msg):
+        if not isinstance(msg, Image):
+            return None  # no laser: the cameras alone
+        k = seen[msg.sensor] = seen.get(msg.sensor, -1) + 1
+        if k % 3 == 2:
+            return None
+        first.setdefault(msg.sensor, msg.t_ns)
+        return msg
+
+    p = TrafficParams(camera_every=2)
+    res = track_traffic(path, params=p, variants=("camera",), message_filter=ten_hz_cameras_only,
+                        stop_ns=t0 + 4_000_000_000)
+    start = min(first.values())
+    ticks = start + np.arange(res.n_ticks) * round(1e9 / p.rate_hz)
+    for cam in ("camera_0", "camera_1"):
+        due = int(np.count_nonzero(ticks > first[cam]))  # a tick runs before the message at its instant
+        assert due > 40
+        assert res.fused_ticks[cam] == due, (cam, res.fused_ticks[cam], due)
+
+
+def test_detection_buffer_keeps_a_sensor_for_its_frame_interval():
+    """D2's buffer: a 25 Hz laser given every 2nd scan keeps ``max_age_s`` (0.15 s); a 10 Hz camera given every 2nd
+    frame (one every 0.2 s) is used at every 15 Hz instant between its frames, and for ``(2 + 1.25) x 0.1 s`` after
+    its last one; without the margin it drops out at 0.15 s."""
+    def feed(buf, until_ns, ticks=()):
+        seen = {"camera": 0, "laser": 0}
+        events = sorted([(int(t), "camera", 2) for t in np.arange(0, until_ns + 1, 100_000_000)]
+                        + [(int(t), "laser", 2) for t in np.arange(0, until_ns + 1, 40_000_000)])
+        out, i = [], 0
+        for tk in [*ticks, np.inf]:
+            while i < len(events) and events[i][0] < tk:
+                t, s, k = events[i]
+                if seen[s] % k == 0:
+                    buf.put(s, t, [], every=k)
+                else:
+                    buf.note(s, t)
+                seen[s] += 1
+                i += 1
+            if np.isfinite(tk):
+                out.append(set(buf.at(int(tk))))
+        return out
+
+    buf = DetectionBuffer(0.15)
+    end = 4_000_000_000  # the last frame of each is stored
+    assert all(got == {"camera", "laser"} for got in feed(buf, end, np.arange(1, 60) * 66_666_667))
+    assert buf.age_limit_s("laser") == pytest.approx(0.15)
+    assert buf.age_limit_s("camera") == pytest.approx(0.325)
+    assert set(buf.at(end + 140_000_000)) == {"camera", "laser"}  # both stop after their frames at 4 s
+    assert set(buf.at(end + 160_000_000)) == {"camera"}
+    assert set(buf.at(end + 330_000_000)) == set()
+    fixed = DetectionBuffer(0.15, margin_periods=None)
+    feed(fixed, end)
+    assert set(fixed.at(end + 160_000_000)) == set()
 
 
 def test_every_frame_and_scan_or_every_second_one(road, run):

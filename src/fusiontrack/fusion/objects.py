@@ -4,8 +4,11 @@ Input: per sensor, the latest list of :class:`~fusiontrack.types.Detection` from
 boxes, ``laser/vehicles.py``; camera: blobs on the road plane, ``vision/vehicles.py``), in the road frame.
 
 * **D2 synchronisation** (:class:`DetectionBuffer`): each sensor's latest frame is used at a fusion instant ``t``
-  if it is at most ``max_age_s`` old; its positions are moved to ``t`` with the branch track's velocity,
-  ``x(t) = x(t_s) + v·(t − t_s)``.
+  if it is at most ``max_age_s`` old — or, for a sensor whose frames come farther apart (a 10 Hz camera, or a
+  branch given every k-th frame), at most ``(k + 1.25)`` of its frame periods (measured from its stream) [RECON],
+  so its detections take part at every instant between two of its frames, one dropped frame included; its
+  positions are
+  moved to ``t`` with the branch track's velocity, ``x(t) = x(t_s) + v·(t − t_s)``.
 * **D5 association** (:func:`fuse_objects`): sensors are folded in one by one, lasers first (the most precise
   positions), each by a Hungarian assignment against the objects built so far, cost ``‖p_o − p_d‖`` plus a
   size-compatibility penalty, gated at ``gate_m`` (2 m) — or, for the imprecise (a far camera's position is
@@ -25,6 +28,7 @@ boxes, ``laser/vehicles.py``; camera: blobs on the road plane, ``vision/vehicles
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, fields
@@ -36,6 +40,8 @@ from ..errors import ConfigError
 from ..tracking.association import hungarian
 from ..tracking.vehicle_pf import FusedObject
 from ..types import Detection, ObjectClass
+
+log = logging.getLogger(__name__)
 
 __all__ = ["DetectionBuffer", "ObjectFusionParams", "fuse_objects", "sensor_kind"]
 
@@ -185,25 +191,98 @@ def _object(c: _Cluster, p: ObjectFusionParams) -> FusedObject:
 
 
 class DetectionBuffer:
-    """D2: the latest detections of each sensor, moved to a common instant with their track velocities."""
+    """D2: the latest detections of each sensor, moved to a common instant with their track velocities.
 
-    def __init__(self, max_age_s: float = 0.15) -> None:
+    Parameters
+    ----------
+    max_age_s : float
+        A frame older than this is not used (0.15 s) ...
+    margin_periods : float or None
+        ... unless the sensor's frames come farther apart: its limit is then ``k + margin_periods`` times its frame
+        period (1.25: one dropped frame and the timing jitter), ``k`` its branch's ``every`` (:meth:`put`) and the
+        period the median of its last ``n_intervals`` intervals between the frames it sent (:meth:`note`), at most
+        ``max_age_cap_s``. ``None`` keeps ``max_age_s`` for every sensor.
+    max_age_cap_s : float
+        Largest per-sensor limit (1.0 s): a sensor that has gone quiet is not stretched further.
+    n_intervals : int
+        Intervals the median is taken over (9: an outage does not move it).
+
+    Attributes
+    ----------
+    max_age_ns : int
+        ``max_age_s`` in ns.
+    """
+
+    def __init__(self, max_age_s: float = 0.15, *, margin_periods: float | None = 1.25, max_age_cap_s: float = 1.0,
+                 n_intervals: int = 9) -> None:
         if not (math.isfinite(max_age_s) and max_age_s > 0):
             raise ConfigError(f"DetectionBuffer max_age_s: expected a finite value > 0, got {max_age_s!r}")
+        if margin_periods is not None and not (math.isfinite(margin_periods) and margin_periods >= 0):
+            raise ConfigError(f"DetectionBuffer margin_periods: expected a finite value >= 0 or None, got "
+                              f"{margin_periods!r}")
+        if not (math.isfinite(max_age_cap_s) and max_age_cap_s > 0):
+            raise ConfigError(f"DetectionBuffer max_age_cap_s: expected a finite value > 0, got {max_age_cap_s!r}")
+        if isinstance(n_intervals, bool) or not isinstance(n_intervals, int) or n_intervals < 1:
+            raise ConfigError(f"DetectionBuffer n_intervals: expected an integer >= 1, got {n_intervals!r}")
         self.max_age_ns = int(max_age_s * 1e9)
+        self._margin = margin_periods
+        self._cap_ns = max(self.max_age_ns, int(max_age_cap_s * 1e9))
+        self._n_intervals = n_intervals
         self._latest: dict[str, tuple[int, list[Detection]]] = {}
+        self._last_seen: dict[str, int] = {}
+        self._intervals: dict[str, list[int]] = {}
+        self._every: dict[str, int] = {}
+        self._limit_ns: dict[str, int] = {}
 
-    def put(self, sensor: str, t_ns: int, detections: Sequence[Detection]) -> None:
-        """Store a sensor's frame (an older frame than the one held is ignored: out-of-order messages)."""
+    def age_limit_s(self, sensor: str) -> float:
+        """The oldest a frame of ``sensor`` may be to be used (s): ``max_age_s``, or more for a sparse sensor."""
+        return self._limit_ns.get(sensor, self.max_age_ns) / 1e9
+
+    def note(self, sensor: str, t_ns: int) -> None:
+        """A frame of ``sensor`` arrived at ``t_ns``, whether its branch processes it or not: measures the
+        sensor's frame period (:meth:`put` notes the frames it stores)."""
+        last = self._last_seen.get(sensor)
+        if last is not None and t_ns <= last:
+            return
+        self._last_seen[sensor] = int(t_ns)
+        if last is None or self._margin is None:
+            return
+        iv = self._intervals.setdefault(sensor, [])
+        iv.append(int(t_ns) - last)
+        del iv[:-self._n_intervals]
+        self._update_limit(sensor)
+
+    def _update_limit(self, sensor: str) -> None:
+        iv = self._intervals.get(sensor)
+        if not iv or self._margin is None:
+            return
+        period = float(np.median(iv))
+        k = self._every.get(sensor, 1)
+        limit = min(self._cap_ns, max(self.max_age_ns, int((k + self._margin) * period)))
+        if limit > self.max_age_ns and self._limit_ns.get(sensor, self.max_age_ns) == self.max_age_ns:
+            log.info("%s: a frame every %.3f s, every %d used: its detections are fused for up to %.3f s after "
+                     "their frame (max_age_s %.3f s)", sensor, period / 1e9, k, limit / 1e9, self.max_age_ns / 1e9)
+        self._limit_ns[sensor] = limit
+
+    def put(self, sensor: str, t_ns: int, detections: Sequence[Detection], *, every: int = 1) -> None:
+        """Store a sensor's frame (an older frame than the one held is ignored: out-of-order messages).
+
+        ``every`` = k: its branch is given every k-th frame of the sensor, so the stored frames are k periods apart.
+        """
+        if every != self._every.get(sensor, 1):
+            self._every[sensor] = int(every)
+            self._update_limit(sensor)
+        self.note(sensor, t_ns)
         held = self._latest.get(sensor)
         if held is None or t_ns >= held[0]:
             self._latest[sensor] = (int(t_ns), list(detections))
 
     def at(self, t_ns: int) -> dict[str, list[Detection]]:
-        """Every sensor's detections whose frame is at most ``max_age_s`` from ``t_ns``, moved to ``t_ns``."""
+        """Every sensor's detections whose frame is within the sensor's age limit of ``t_ns``
+        (:meth:`age_limit_s`), moved to ``t_ns``."""
         out: dict[str, list[Detection]] = {}
         for s, (ts, dets) in self._latest.items():
-            if abs(t_ns - ts) > self.max_age_ns:
+            if abs(t_ns - ts) > self._limit_ns.get(s, self.max_age_ns):
                 continue
             dt = (t_ns - ts) / 1e9
             out[s] = [_moved(d, dt) for d in dets] if dt else dets

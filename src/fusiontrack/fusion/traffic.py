@@ -57,14 +57,25 @@ class TrafficParams:
 
     ``camera_every`` = k gives each camera's branch only every k-th frame (1: all); the others are dropped
     before any processing (the branch's tracker steps over the gap, fusion uses the latest frame, at most
-    ``k / 15`` s old at 15 Hz). Default 2 [RECON]: the cameras cost half, and on ``benchmarks/traffic.py`` (3 seeds x
-    60 s) fusion + PF went from MOTA 0.712 / IDF1 0.819 / 15 IDSW (every frame) to 0.783 / 0.832 / 16.
+    ``k / 15`` s old at 15 Hz; the fusion's buffer keeps a frame for up to ``k + 1.25`` of its sensor's periods,
+    measured from the stream, when that is longer than ``fusion.max_age_s``, so a 10 Hz camera, ``k = 3`` or a
+    dropped frame do not make its detections vanish between two frames). Default 2 [RECON]: the cameras cost half,
+    and on ``benchmarks/traffic.py`` (3 seeds x 60 s) fusion + PF went from MOTA 0.712 / IDF1 0.819 / 15 IDSW
+    (every frame) to 0.783 / 0.832 / 16.
     ``laser_every`` likewise for each laser's scans (its background then learns from those scans only). Default 2
     [RECON]: 25 Hz scans at 12.5 Hz, still close to the 15 Hz fusion rate; the laser branch costs half, and on
     ``benchmarks/traffic.py`` (3 seeds x 60 s, ``camera_every = 2``) fusion + PF went from MOTA 0.783 / IDF1 0.832 /
     16 IDSW (every scan) to 0.778 / 0.851 / 9, the injected occlusions kept as before (3/4), the incidents as
     before or better (stopped vehicle 3/3, onset latency 0.73 -> 0.80 s; road leaving 2/3 -> 3/3). On 16 s clips
     (seeds 0-2) MOTA 0.905 / 0.976 / 0.935 -> 0.877 / 0.956 / 0.939, seed 0 with two id switches (none).
+
+    The branches count in the frames (scans) they are given, so with ``camera_every = k`` every per-frame constant
+    of the camera branch spans k times as long: its tracker's ``n_confirm`` (3 frames: 0.4 s instead of 0.2 s at
+    k = 2, 15 Hz), the foreground model's MOG2 rate α = 0.002 per frame (``history = 500``: 67 s instead of 33 s),
+    its ``illumination_frames`` (30: 4 s of fast relearning) and stopped-object timings, and the road memory's
+    update every 4th frame; likewise ``laser_every`` for the laser branch's background and tracker. The time-based
+    ones (``max_coast_s``, the Kalman noise per second) are unchanged. Tune them in ``camera``/``laser`` when
+    changing k.
 
     The pipeline runs OpenCV single-threaded (``cv2.setNumThreads(1)``, restored after the run): its images are
     small, and OpenCV's worker threads cost more CPU than they save (0.7-0.8 ms of CPU per camera frame of
@@ -115,7 +126,10 @@ class TrafficResult:
     """What :func:`track_traffic` measured. ``states[variant]`` are the track states of each variant.
 
     ``timings_s`` is the wall-clock time spent per part, ``cpu_s`` the CPU time of the process (every thread) per
-    part: on a shared machine the wall clock also counts the time other processes held the cores.
+    part: on a shared machine the wall clock also counts the time other processes held the cores. The parts are
+    ``read`` (reading and decoding the recording's messages, the skipped frames and scans included), the branches
+    (``laser_branch``, ``camera_branch``), the trackers of the variants and ``scene``. ``fused_ticks`` counts, per
+    sensor, the fusion instants at which a frame of it was recent enough to take part.
     """
 
     states: dict[str, list[TrackState]]
@@ -129,11 +143,13 @@ class TrafficResult:
     errors: dict[str, int] = field(default_factory=dict)
     t0_ns: int = 0
     cpu_s: dict[str, float] = field(default_factory=dict)
+    fused_ticks: dict[str, int] = field(default_factory=dict)
 
-    def speed_x_real_time(self, parts: Sequence[str] = ("laser_branch", "camera_branch", "fusion_pf", "scene"),
-                          cpu: bool = False) -> float:
-        """Recording seconds per processing second of the named parts (the pipeline's own work); by the wall
-        clock, or by CPU time (``cpu``)."""
+    def speed_x_real_time(self, parts: Sequence[str] = ("read", "laser_branch", "camera_branch", "fusion_pf",
+                                                        "scene"), cpu: bool = False) -> float:
+        """Recording seconds per processing second of the named parts (by default what a user of ``fusion_pf``
+        waits for: reading the recording, the branches, the particle filter and scene understanding); by the
+        wall clock, or by CPU time (``cpu``)."""
         spent = sum((self.cpu_s if cpu else self.timings_s).get(p, 0.0) for p in parts)
         return self.duration_s / spent if spent > 0 else math.inf
 
@@ -284,7 +300,7 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
     states: dict[str, list[TrackState]] = {v: [] for v in variants}
     tracker_events: list[Event] = []
     scene_events: list[Event] = []
-    timings = dict.fromkeys(("laser_branch", "camera_branch", *variants, "scene"), 0.0)
+    timings = dict.fromkeys(("read", "laser_branch", "camera_branch", *variants, "scene"), 0.0)
     cpu = dict.fromkeys(timings, 0.0)
     clock: dict[str, tuple[float, float]] = {}
 
@@ -327,8 +343,13 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
         last_t = None
         seen: dict[str, int] = {}
 
+        fused: dict[str, int] = {}
+        first_frame: dict[str, int] = {}
+
         def tick(t_ns: int) -> None:
             per_sensor = buffer.at(t_ns)
+            for s in per_sensor:
+                fused[s] = fused.get(s, 0) + 1
             for v, k in kal.items():
                 start(v)
                 objs = fuse_objects(_select(per_sensor, k.kinds), p.fusion)
@@ -346,7 +367,15 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
                     scene.update(t_ns, out)
                     stop("scene")
 
-        for msg in rec.messages(topics, time_source=time_source, start_ns=start_ns, stop_ns=stop_ns):
+        stream = iter(rec.messages(topics, time_source=time_source, start_ns=start_ns, stop_ns=stop_ns))
+        while True:
+            start("read")  # reading and decoding, the frames and scans a branch skips included
+            try:
+                msg = next(stream)
+            except StopIteration:
+                break
+            finally:
+                stop("read")
             if message_filter is not None:
                 msg = message_filter(msg)
                 if msg is None:
@@ -363,6 +392,8 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
             try:
                 if isinstance(msg, LaserScan) and laser is not None:
                     seen[msg.sensor] = seen.get(msg.sensor, -1) + 1
+                    buffer.note(msg.sensor, t)  # its period, skipped scans included
+                    every = p.laser_every
                     if seen[msg.sensor] % p.laser_every:
                         continue
                     part = "laser_branch"
@@ -370,6 +401,8 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
                     dets = laser(msg)
                 elif isinstance(msg, Image) and msg.sensor in cam_by_sensor and msg.encoding != "mono16":
                     seen[msg.sensor] = seen.get(msg.sensor, -1) + 1
+                    buffer.note(msg.sensor, t)
+                    every = p.camera_every
                     if seen[msg.sensor] % p.camera_every:
                         continue
                     part = "camera_branch"
@@ -385,11 +418,18 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
                 log.warning("%s at %d ns: message skipped (%s)", msg.sensor, t, err)
                 continue
             counts[msg.sensor] = counts.get(msg.sensor, 0) + len(dets)
-            buffer.put(msg.sensor, t, dets)
+            buffer.put(msg.sensor, t, dets, every=every)
+            first_frame.setdefault(msg.sensor, n_ticks)
             if progress is not None:
                 progress(min(1.0, (t - t_first) / span))
         if scene is not None:
             scene_events = scene.events  # ended ones with their end, open ones with t_end_ns None
+        for s, k in first_frame.items():
+            due = n_ticks - k  # the fusion instants after the sensor's first frame
+            if due >= 10 and fused.get(s, 0) < 0.9 * due:
+                log.warning("%s: its detections took part in %d of the %d fusion instants after its first frame "
+                            "(its frames were older than %.3f s at the others: gaps or an outage)", s,
+                            fused.get(s, 0), due, buffer.age_limit_s(s))
     duration = (last_t - first_t) / 1e9 if last_t is not None and first_t is not None else 0.0
     return TrafficResult(states, tracker_events, scene_events, sensors, n_ticks, duration, timings, counts, errors,
-                         first_t or 0, cpu)
+                         first_t or 0, cpu, fused)

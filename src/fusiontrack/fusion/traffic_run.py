@@ -5,7 +5,8 @@ Writes into the output folder:
 * ``tracks.csv``, ``tracks.jsonl`` — the fused particle-filter tracks (states, then the tracker's events);
 * ``events.jsonl`` — scene understanding's incidents (D8: stopped vehicle, road leaving and its early warning,
   jam, wrong way), each with onset ``t_ns``, ``t_end_ns`` (``None`` if still open), place and tracks;
-* ``summary.json`` — sensors, detections per sensor, time spent per part, speed against real time and, when the
+* ``summary.json`` — sensors, detections per sensor, the fusion instants each sensor took part in, time spent per
+  part (reading and decoding the recording included) and the speed against real time it gives, and, when the
   recording has ground truth (a simulation), the metrics of every variant and the incident scores;
 * ``report.html`` — the same as tables, the events on a timeline (against the true incidents when known) and the
   bird's-eye video ``tracks.mp4`` (``video=True``).
@@ -91,7 +92,8 @@ def run_traffic(recording: str | Path, output: str | Path, *, geometry: Any = No
     write_jsonl(output / "events.jsonl", result.scene_events)
     summary: dict[str, Any] = {
         "recording": str(recording), "sensors": result.sensors, "duration_s": result.duration_s,
-        "fusion_instants": result.n_ticks, "detections_per_sensor": result.detections,
+        "fusion_instants": result.n_ticks, "fusion_instants_per_sensor": result.fused_ticks,
+        "detections_per_sensor": result.detections,
         "messages_skipped": result.errors, "time_s": result.timings_s, "cpu_s": result.cpu_s,
         "x_real_time": result.speed_x_real_time(), "x_real_time_cpu": result.speed_x_real_time(cpu=True),
         "tracks": len({s.track_id for s in states}),
