@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import logging
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -142,3 +144,63 @@ def test_bad_inputs(truth, rec, tmp_path):
         evaluate_camera_boxes([], [], w, h)
     empty = evaluate_camera_boxes(frames, [], w, h)  # no tracks: all misses, no crash
     assert (empty.tp, empty.fn) == (0, visible_people(frames, w, h))
+
+
+def test_only_the_named_cameras_states_are_scored(truth, rec, tmp_path):
+    """Boxes of another camera (here: nowhere near anyone in camera_0's image) are not camera_0's false positives;
+    states with an empty camera field count as the named camera."""
+    frames, w, h = truth
+    n = visible_people(frames, w, h)
+    own = truth_states(frames, w, h)
+    other = [replace(s, camera="camera_1", sensor="camera_1", track_id=s.track_id + 1000)
+             for s in truth_states(frames, w, h, shift=50.0)]
+    unnamed = [replace(s, camera="") for s in own]
+    for states in (own + other, unnamed + other):
+        m = evaluate_camera_boxes(frames, states, w, h, camera="camera_0")
+        assert (m.mota, m.idf1, m.num_gt_dets, m.fp) == (1.0, 1.0, n, 0)
+    folder = write_output(tmp_path / "two_cameras", own + other, frames)
+    out = cli_eval(str(folder / "tracks.jsonl"), str(rec), "--camera", "camera_0")
+    assert (out["metrics"]["mota"], out["metrics"]["fp"]) == (1.0, 0)
+
+
+def test_one_state_per_track_and_frame_the_nearest_in_time(truth):
+    """A track with two states near one image (a tracker faster than the camera) is scored by the nearer one:
+    the truth box at the image's time wins over a wrong box 20 ms later, in either order."""
+    frames, w, h = truth
+    n = visible_people(frames, w, h)
+    own = truth_states(frames, w, h)
+    late = [replace(s, t_ns=s.t_ns + 20_000_000, box_px=s.box_px + 300.0) for s in own]
+    for states in (own + late, late + own):
+        m = evaluate_camera_boxes(frames, states, w, h, camera="camera_0")
+        assert (m.mota, m.idf1, m.num_gt_dets, m.fp) == (1.0, 1.0, n, 0)
+
+
+def test_states_far_from_every_image_are_warned_about(truth, caplog):
+    """States outside the time tolerance are not scored; more than 5 % of them is a warning naming the count."""
+    frames, w, h = truth
+    own = truth_states(frames, w, h)
+    after_end = [replace(s, t_ns=s.t_ns + 60_000_000_000) for s in own]  # a minute after the last image
+    few, many = after_end[: len(own) // 100], after_end[: len(own) // 5]
+    with caplog.at_level(logging.DEBUG, logger="fusiontrack.eval.mot"):
+        m = evaluate_camera_boxes(frames, own + few, w, h)
+    assert (m.mota, m.fp) == (1.0, 0)
+    assert not [r for r in caplog.records if r.levelno >= logging.WARNING]
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="fusiontrack.eval.mot"):
+        m = evaluate_camera_boxes(frames, own + many, w, h)
+    assert (m.mota, m.fp) == (1.0, 0)
+    assert any(f"{len(many)} of {len(own) + len(many)} states" in r.getMessage() for r in caplog.records)
+
+
+def test_mot_rows_without_camera_take_it_from_the_tracks_beside_them(truth, rec, tmp_path):
+    frames, w, h = truth
+    folder = write_output(tmp_path / "mot", truth_states(frames, w, h), frames)
+    out = cli_eval(str(folder / "tracks_mot.txt"), str(rec))  # camera_0, from tracks.jsonl
+    assert out["camera"] == "camera_0"
+    assert (out["metrics"]["mota"], out["metrics"]["idf1"]) == (1.0, 1.0)
+    (folder / "tracks.jsonl").unlink()
+    result = runner.invoke(app, ["eval", str(folder / "tracks_mot.txt"), str(rec)])
+    assert result.exit_code != 0
+    message = str(result.exception) + result.output
+    assert "--camera" in message
+    assert "is a folder" not in message

@@ -729,15 +729,25 @@ def eval_(
 
 def _eval_image_boxes(tracks: Path, recording: Path, camera: str | None, time_source: str) -> tuple[Any, str] | None:
     """``eval`` of image boxes against ``/ground_truth/<camera>``; None when no camera is given and ``tracks`` is not
-    a people-camera output of one camera (that has tracks_mot.txt beside it)."""
+    a people-camera output of one camera (that has tracks_mot.txt beside it).
+
+    Only the states of that camera are scored (an empty ``camera`` field counts as it). MOTChallenge rows (a
+    ``.txt``) against a recording need the camera: from ``--camera``, else from the ``tracks.jsonl`` beside them
+    (its boxes of one camera); a ConfigError naming ``--camera`` otherwise.
+    """
     from .errors import RecordingError
     from .eval.mot import evaluate_camera_boxes
     from .io.recording import Recording
     from .io.tracks import read_jsonl, read_mot
     from .types import CameraInfo, GroundTruth, TrackState
 
+    def cameras_of(states: list[TrackState]) -> set[str]:
+        return {s.camera for s in states} - {""}
+
     folder = tracks if tracks.is_dir() else tracks.parent
-    if camera is None and (recording.suffix == ".txt" or not (folder / "tracks_mot.txt").is_file()):
+    mot_vs_recording = tracks.suffix == ".txt" and recording.suffix != ".txt"
+    if camera is None and not mot_vs_recording and (recording.suffix == ".txt"
+                                                    or not (folder / "tracks_mot.txt").is_file()):
         return None  # a MOTChallenge gt file, or not a people-camera output
     source = tracks
     if tracks.is_dir():
@@ -750,8 +760,19 @@ def _eval_image_boxes(tracks: Path, recording: Path, camera: str | None, time_so
     states = ([r for r in read_jsonl(source) if isinstance(r, TrackState) and r.box_px is not None]
               if source.suffix == ".jsonl" else None)
     auto = camera is None
+    if camera is None and states is None:  # MOT rows: their camera is that of the tracks.jsonl beside them
+        sibling = source.parent / "tracks.jsonl"
+        cams = cameras_of([r for r in read_jsonl(sibling) if isinstance(r, TrackState) and r.box_px is not None]) \
+            if sibling.is_file() else set()
+        if len(cams) != 1:
+            found = f"the boxes of {sibling.name} beside it are of {sorted(cams)}" if sibling.is_file() else \
+                "no tracks.jsonl beside it names their camera"
+            raise ConfigError(f"{source}: MOTChallenge rows against the recording {recording} are scored against one "
+                              f"camera's truth boxes: give --camera ({found})")
+        camera = cams.pop()
+        log.info("%s: the boxes are of %s (from %s)", source, camera, sibling)
     if camera is None:  # auto: the one camera of the states, if the recording has its truth boxes
-        cams = {s.camera for s in states or []} - {""}
+        cams = cameras_of(states or [])
         if len(cams) != 1:
             return None
         camera = cams.pop()
@@ -760,7 +781,7 @@ def _eval_image_boxes(tracks: Path, recording: Path, camera: str | None, time_so
     with Recording(recording) as rec:
         topics = rec.topics()
         if topic not in topics:
-            if auto:
+            if auto and states is not None:
                 return None
             found = sorted(t for t in topics if t.startswith("/ground_truth/"))
             raise RecordingError(f"{recording}: no truth boxes {topic} for --camera {camera} (found "
@@ -771,7 +792,7 @@ def _eval_image_boxes(tracks: Path, recording: Path, camera: str | None, time_so
             if info_topic in topics else None
     size = (info.width, info.height) if info is not None else (None, None)
     res: Any = states if states is not None else read_mot(source)
-    return evaluate_camera_boxes(truth, res, *size, name=f"{source} vs {topic}"), camera
+    return evaluate_camera_boxes(truth, res, *size, camera=camera, name=f"{source} vs {topic}"), camera
 
 
 def _bounds_of(recording: Path) -> Any:

@@ -587,7 +587,8 @@ def evaluate_boxes(gt: MotBoxes, res: MotBoxes, *, preprocess: bool | None = Non
 def evaluate_camera_boxes(truth: Sequence[GroundTruth], tracks: Iterable[TrackState | Track] | MotBoxes,
                           width: float | None, height: float | None, *, classes: Iterable[str] | None = ("person",),
                           min_visibility: float = 0.5, iou_threshold: float = 0.5,
-                          time_tolerance_ns: int | None = None, name: str = "camera") -> Metrics:
+                          time_tolerance_ns: int | None = None, camera: str | None = None, name: str = "camera",
+                          warn_dropped_fraction: float = 0.05) -> Metrics:
     """Metrics of image tracks against a simulated camera's truth boxes (see the module docstring).
 
     Parameters
@@ -597,7 +598,9 @@ def evaluate_camera_boxes(truth: Sequence[GroundTruth], tracks: Iterable[TrackSt
         (n, 4) and ``visibility`` (n,). Record ``k`` in time order is frame ``k + 1``.
     tracks : iterable of TrackState or Track, or MotBoxes
         States with ``box_px`` in that camera's image (states without a box are skipped), or MOTChallenge
-        rows already numbered by those frames (e.g. ``tracks_mot.txt`` of ``fusiontrack track``).
+        rows already numbered by those frames (e.g. ``tracks_mot.txt`` of ``fusiontrack track``). Each state is
+        scored in the frame nearest in time; of several states of one track in one frame, the nearest (the
+        earlier on a tie) is kept, as in :func:`evaluate_floor`.
     width, height : float or None
         Image size (px); truth boxes are clipped to it (``None``: not clipped).
     classes : iterable of str or None
@@ -607,14 +610,20 @@ def evaluate_camera_boxes(truth: Sequence[GroundTruth], tracks: Iterable[TrackSt
     iou_threshold : float
         CLEAR and Identity match threshold.
     time_tolerance_ns : int or None
-        Largest offset between a state and its frame; ``None`` = half the median truth period.
+        Largest offset between a state and its frame; ``None`` = half the median truth period. States farther
+        from every frame are not scored (a warning when more than ``warn_dropped_fraction`` of them).
+    camera : str or None
+        The truth's camera: only states of it (``TrackState.camera``, an empty field counting as this camera)
+        are scored; ``None`` = every state (MOT rows carry no camera).
     name : str
-        Sequence name used in error messages.
+        Sequence name used in error and warning messages.
+    warn_dropped_fraction : float
+        Share of the states outside the time tolerance above which a warning is logged (0.05).
 
     Raises
     ------
     EvaluationError
-        No truth records, two at one time, two states of one track in one frame, a bad threshold, or MOT
+        No truth records, two at one time, two MOT rows of one track in one frame, a bad threshold, or MOT
         rows outside ``1 .. len(truth)``.
     """
     from ..vision.people import camera_truth_boxes  # vision pulls in OpenCV: only when asked
@@ -643,17 +652,32 @@ def evaluate_camera_boxes(truth: Sequence[GroundTruth], tracks: Iterable[TrackSt
             raise EvaluationError(f"{name}: track rows in frames {int(res.frame.min())}..{int(res.frame.max())}, "
                                   f"expected 1..{len(frames)} (one per ground-truth record)")
     else:
-        states = [s for s in flatten_states(tracks) if s.box_px is not None]
+        boxed = [s for s in flatten_states(tracks) if s.box_px is not None]
+        states = boxed if camera is None else [s for s in boxed if s.camera in (camera, "")]
+        if len(states) < len(boxed):
+            others = sorted({s.camera for s in boxed} - {camera, ""})
+            logger.info("%s: %d states with boxes of other cameras (%s) are not evaluated", name,
+                        len(boxed) - len(states), ", ".join(others))
+        tolerance = _time_tolerance(gt_t, time_tolerance_ns)
         st_t = np.array([s.t_ns for s in states], dtype=np.int64)
-        frame, _, inside = _nearest_frame(gt_t, st_t, _time_tolerance(gt_t, time_tolerance_ns))
-        if not inside.all():
-            logger.debug("%s: %d states farther than the tolerance from every frame are not evaluated", name,
-                         int((~inside).sum()))
-        box = np.array([s.box_px for s in states], dtype=np.float64).reshape(-1, 4)[inside]
-        res = MotBoxes(frame[inside].astype(np.int64) + 1,
-                       np.array([s.track_id for s in states], dtype=np.int64)[inside],
-                       np.column_stack([box[:, :2], box[:, 2:] - box[:, :2]]), np.ones(int(inside.sum())),
-                       np.zeros((int(inside.sum()), 0)))
+        st_id = np.array([s.track_id for s in states], dtype=np.int64)
+        box = np.array([s.box_px for s in states], dtype=np.float64).reshape(-1, 4)
+        frame, dt, inside = _nearest_frame(gt_t, st_t, tolerance)
+        n_out = int((~inside).sum())
+        if n_out:
+            share = n_out / inside.size
+            (logger.warning if share > warn_dropped_fraction else logger.debug)(
+                "%s: %d of %d states (%.1f %%) are farther than %.3f s from every ground-truth frame and are not "
+                "evaluated (tracks of another time base or rate?)", name, n_out, inside.size, 100 * share,
+                tolerance / 1e9)
+        frame, dt, st_t, st_id, box = frame[inside], dt[inside], st_t[inside], st_id[inside], box[inside]
+        order = np.lexsort((st_t, dt, st_id, frame))  # by frame, id, then nearest in time (the earlier on a tie)
+        frame, st_id, box = frame[order], st_id[order], box[order]
+        first = np.ones(frame.size, bool)
+        first[1:] = (frame[1:] != frame[:-1]) | (st_id[1:] != st_id[:-1])
+        frame, st_id, box = frame[first], st_id[first], box[first]
+        res = MotBoxes(frame.astype(np.int64) + 1, st_id, np.column_stack([box[:, :2], box[:, 2:] - box[:, :2]]),
+                       np.ones(frame.size), np.zeros((frame.size, 0)))
     return evaluate_boxes(gt, res, preprocess=True, iou_threshold=iou_threshold, n_frames=len(frames), name=name)
 
 
