@@ -184,7 +184,32 @@ def test_assignment_gap_is_the_margin_of_the_best_assignment():
     # three members, two pieces: 6 assignments; best (0 -> m2, 1 -> m0) = 1.6, second (0 -> m2, 1 -> m1) = 1.3
     s3 = np.array([[0.0, 0.1, 0.9], [0.7, 0.4, -0.5]])
     assert _assignment_gap(s3) == pytest.approx(1.6 - 1.3)
+    assert _assignment_gap(s3.T) == pytest.approx(1.6 - 1.3)
     assert _assignment_gap(np.array([[0.3]])) == np.inf
+    assert _assignment_gap(np.array([[0.3, 0.3]])) == 0.0  # a tie: no evidence
+
+
+def test_assignment_gap_matches_enumeration_and_scales_to_large_merges():
+    import itertools
+
+    from fusiontrack.fusion.tracker import _assignment_gap
+
+    def enumerated(s: np.ndarray) -> float:
+        s = s if s.shape[0] <= s.shape[1] else s.T
+        k = s.shape[0]
+        totals = sorted(s[np.arange(k), list(c)].sum() for c in itertools.permutations(range(s.shape[1]), k))
+        return totals[-1] - totals[-2] if len(totals) > 1 else np.inf
+
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        s = rng.normal(size=(int(rng.integers(1, 6)), int(rng.integers(1, 7))))
+        assert _assignment_gap(s) == pytest.approx(enumerated(s))
+    # ten members: score -|i - j| of member i for piece j; the best is the diagonal (0), and every other
+    # assignment moves at least two members by one piece or more (sum |i - pi(i)| >= 2): the gap is 2
+    i = np.arange(10)
+    s10 = -np.abs(i[:, None] - i[None]).astype(float)
+    assert _assignment_gap(s10) == pytest.approx(2.0)
+    assert _assignment_gap(s10[:, ::-1]) == pytest.approx(2.0)  # pieces in another order
 
 
 def test_identity_check_undoes_an_exchange_the_laser_made_at_a_split(pair, monkeypatch):
@@ -228,6 +253,133 @@ def test_identity_check_undoes_an_exchange_the_laser_made_at_a_split(pair, monke
         assert after == before, (split.t_ns, before, after)
 
 
+class _FakeLaser:
+    """The laser tracker's ids of three people standing in rows 0, 1, 2 (row -> id), changed by ``exchange_ids``."""
+
+    def __init__(self, refuse: bool = False) -> None:
+        self.ids = [1, 2, 3]
+        self.refuse = refuse
+        self.calls: list[tuple[int, int]] = []
+
+    def exchange_ids(self, a: int, b: int) -> bool:
+        self.calls.append((a, b))
+        if self.refuse or a == b or a not in self.ids or b not in self.ids:
+            return False
+        self.ids = [b if i == a else a if i == b else i for i in self.ids]
+        return True
+
+
+class _FakeBank:
+    """Classifiers that each prefer one person: ``prefers[id]`` = the row (0, 1, 2) of the person it learnt;
+    ``trained``: the ids with a classifier. A box's row is found from its centre column (``row_u``)."""
+
+    def __init__(self, prefers: dict[int, int], trained: set[int]) -> None:
+        self.prefers, self.trained = prefers, trained
+        self.row_u = np.zeros(3)
+
+    def is_trained(self, tid: int) -> bool:
+        return tid in self.trained
+
+    def box_scores(self, pixels, boxes, ids) -> np.ndarray:
+        rows = np.argmin(np.abs(0.5 * (boxes[:, :1] + boxes[:, 2:3]) - self.row_u[None]), axis=1)
+        return np.array([[1.0 if self.prefers[tid] == r else -1.0 for tid in ids] for r in rows])
+
+
+class _Frames:
+    """A black image at every time (or only at ``times``)."""
+
+    def __init__(self, times: set[int] | None = None) -> None:
+        self.times = times
+
+    def nearest_time(self, t_ns: int) -> int | None:
+        return t_ns if self.times is None or t_ns in self.times else None
+
+    def at(self, t_ns: int):
+        from fusiontrack.types import Image
+
+        if self.nearest_time(t_ns) is None:
+            return None
+        return Image(t_ns, "camera", "camera", np.zeros((480, 640, 3), np.uint8), "bgr8")
+
+
+ROWS_Y = (-0.7, 0.0, 0.7)  # three people standing 6 m in front of the camera, 0.7 m apart (< d_contact_m)
+
+
+def _three_people(laser: _FakeLaser, bank: _FakeBank, frames: _Frames, check_frames: int = 1) -> FusionTracker:
+    """A fusion tracker whose laser tracker and classifiers are the fakes."""
+    cam = PinholeCamera.from_pose([0.0, 0.0, 3.0], 0.0, np.radians(15), fx=400, fy=400, width=640, height=480)
+    trk = FusionTracker(cam, frames, FusionParams(check_frames=check_frames, max_overlap=1.0))
+    trk.laser, trk.bank = laser, bank
+    boxes = trk._boxes(np.array([[6.0, y] for y in ROWS_Y]))
+    assert np.isfinite(boxes).all()
+    bank.row_u = 0.5 * (boxes[:, 0] + boxes[:, 2])
+    assert np.unique(np.round(bank.row_u)).size == 3
+    return trk
+
+
+def _step_states(trk: FusionTracker, t_ns: int) -> list:
+    """The laser tracker's states at ``t_ns``: its current ids, row by row."""
+    from fusiontrack.types import TrackState
+
+    return [TrackState(t_ns, "laser", tid, np.array([6.0, y]), np.zeros(2))
+            for tid, y in zip(trk.laser.ids, ROWS_Y, strict=True)]
+
+
+def test_two_exchanges_sharing_a_track_in_one_step_return_the_laser_trackers_ids():
+    """Checks (1, 2) and (2, 3) both decide "exchange" on one image (every classifier prefers the other box of its
+    pair): the states returned must carry the ids the laser tracker has from then on, one exchange per track and
+    step, and the relabels must rename the raw laser ids as the laser tracker did."""
+    laser = _FakeLaser()
+    prefers = {1: 1, 2: 0, 3: 1}  # 1 and 2 look like each other's row; 3 like row 1 (2's)
+    bank = _FakeBank(prefers, {1, 2, 3})
+    trk = _three_people(laser, bank, _Frames())
+    t = 1_000_000_000
+    out = trk._check_identities(t, _step_states(trk, t))
+    assert [s.track_id for s in out] == laser.ids  # this step's states = the laser's ids from the next step
+    assert len(trk.relabels) == 1  # the other check of the shared track waits for the next image
+    assert trk.stats.exchanges == 1
+    # later steps go on from the laser tracker's ids; each exchange keeps states and laser ids in step
+    for k in range(1, 4):
+        tk = t + k * 40_000_000
+        out = trk._check_identities(tk, _step_states(trk, tk))
+        assert [s.track_id for s in out] == laser.ids
+    # the relabels, applied in order to ids that never changed (row k = raw id k + 1), give the laser's ids
+    raw = [dataclasses.replace(s, track_id=r + 1, t_ns=t) for r, s in enumerate(out)]
+    final = relabel_states(raw, [dataclasses.replace(r, from_ns=t, to_ns=t + 1) for r in trk.relabels])
+    assert [s.track_id for s in final] == laser.ids
+    assert [(r.a, r.b) for r in trk.relabels] == laser.calls
+
+
+def test_exchange_refused_by_the_laser_tracker_relabels_nothing():
+    laser = _FakeLaser(refuse=True)
+    bank = _FakeBank({1: 1, 2: 0, 3: 2}, {1, 2, 3})  # (1, 2) say "exchange"; (2, 3) "keep"
+    trk = _three_people(laser, bank, _Frames())
+    t = 1_000_000_000
+    out = trk._check_identities(t, _step_states(trk, t))
+    assert laser.calls == [(1, 2)]
+    assert [s.track_id for s in out] == [1, 2, 3] == laser.ids
+    assert trk.relabels == []
+    assert trk.stats.exchanges == 0
+    assert not [e for e in trk.events if e.kind == "identity"]
+
+
+def test_classifier_trained_after_the_contact_does_not_vote_in_its_check():
+    """1 has a classifier at the contact and finds its track on the other person's box ("exchange"); 2 gets its
+    first classifier only after the contact, from its track's person, so it votes "keep" (strongly): it learnt
+    whoever its track followed after a possible exchange, so only 1's evidence may decide."""
+    laser = _FakeLaser()
+    bank = _FakeBank({1: 1, 2: 1, 3: 2}, {1})
+    t = 1_000_000_000
+    trk = _three_people(laser, bank, _Frames({t + 40_000_000, t + 80_000_000}), check_frames=2)
+    trk._check_identities(t, _step_states(trk, t))  # the contact: no image yet
+    assert trk._checks[(1, 2)].voters == {1}
+    bank.trained.add(2)  # 2 learns (from its own track's box, row 1) while the check waits
+    for k in (1, 2):
+        trk._check_identities(t + k * 40_000_000, _step_states(trk, t + k * 40_000_000))
+    assert [(r.a, r.b) for r in trk.relabels] == [(1, 2)]
+    assert laser.ids == [2, 1, 3]
+
+
 # --------------------------------------------------------------------------------------------------
 # The camera's horizontal bias, learnt by the pipeline itself
 # --------------------------------------------------------------------------------------------------
@@ -257,7 +409,8 @@ def crowd(tmp_path_factory: pytest.TempPathFactory) -> dict:
         mp.setattr(FusionTracker, "__init__", spy)
         states, events, stats = track_fused(path, tracker_params=SIM_PF, area_m=Simulation(scenario).world.bounds_m,
                                             clock_corrections_ns=corrections)
-    return {"gt": gt, "boxes": boxes, "states": states, "events": events, "stats": stats, "used": used}
+    return {"gt": gt, "boxes": boxes, "states": states, "events": events, "stats": stats, "used": used,
+            "path": path, "kw": {"area_m": Simulation(scenario).world.bounds_m, "clock_corrections_ns": corrections}}
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -313,6 +466,44 @@ def test_people_pipeline_learns_the_camera_bias_and_fuses_through_the_corrected_
            for name, cam in (("calibrated", bias.camera), ("corrected", bias.corrected_camera))}
     assert np.median(iou["corrected"]) > 0.5
     assert np.median(iou["corrected"]) > np.median(iou["calibrated"]) + 0.3
+
+
+def test_bias_is_learnt_on_the_compressed_image_topic_the_pipeline_fuses(crowd, tmp_path):
+    """The crowd recording's first 8 s re-written with its camera as CompressedImage (PNG), and a decoy raw image
+    topic of the same camera (three black frames, written first): the pipeline fuses the topic it is given, and
+    learns the bias on that topic, not on the camera's first raw one."""
+    from fusiontrack.calibration import open_bias_inputs
+    from fusiontrack.errors import RecordingError
+    from fusiontrack.io.writer import RecordingWriter
+    from fusiontrack.types import Image
+
+    dst = tmp_path / "compressed"
+    with Recording(crowd["path"]) as rec, RecordingWriter(dst) as out:
+        stop = rec.start_ns + 8_000_000_000
+        first = next(m for m in rec.messages(["/camera_0/image"]) if isinstance(m, Image))
+        for k in range(3):
+            out.write(Image(first.t_ns + k, "camera_0", first.frame_id, np.zeros_like(first.pixels), "bgr8"),
+                      topic="/camera_0/decoy", log_t_ns=rec.start_ns + k)
+        for topic in ("/tf_static", "/camera_0/camera_info", "/camera_0/image", "/laser_0/scan", "/laser_1/scan"):
+            by_log = rec.messages([topic], time_source="log", stop_ns=stop)
+            for log_msg, msg in zip(by_log, rec.messages([topic], stop_ns=stop), strict=True):
+                out.write(msg, topic=topic, log_t_ns=log_msg.t_ns,
+                          image_format="png" if topic == "/camera_0/image" else "raw")
+    with Recording(dst) as rec:
+        types = {t: i.msgtype for t, i in rec.topics().items()}
+    assert types["/camera_0/image"] == "sensor_msgs/msg/CompressedImage"
+    assert types["/camera_0/decoy"] == "sensor_msgs/msg/Image"
+    assert open_bias_inputs(dst, "camera_0").image_topic == "/camera_0/decoy"  # default: the raw one
+    with pytest.raises(RecordingError, match="camera_info"):
+        open_bias_inputs(dst, "camera_0", image_topic="/camera_0/camera_info")
+    _, events, stats = track_fused(dst, tracker_params=SIM_PF, camera_topic="/camera_0/image", **crowd["kw"])
+    bias = stats.bias
+    assert stats.camera == "camera_0"
+    assert bias is not None
+    assert bias.updates >= 40
+    assert bias.applied
+    assert math.degrees(bias.bias_rad) == pytest.approx(YAW_ERROR_DEG, abs=0.2)  # the simulator's yaw error
+    assert [e.kind for e in events].count("camera_bias") == 1
 
 
 def test_recording_without_camera_is_tracked_with_the_lasers_alone(tmp_path, caplog):

@@ -42,6 +42,8 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 BoxSource = Literal["blobs", "truth"]
+IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+"""Camera image topics the bias reads (the reader decodes compressed images into :class:`~fusiontrack.types.Image`)."""
 PIXEL_EDGE_OFFSET_PX = 0.5
 """Blob boxes (ALGORITHMS.md A4) are on pixel edges, pixel ``k`` covering ``[k, k + 1)``; in the camera model's
 (OpenCV's) coordinates pixel ``k`` is centred on ``k``, so a blob box is moved by -0.5 px before use."""
@@ -93,13 +95,34 @@ def _camera_info(rec: Recording, camera: str) -> CameraInfo | None:
     return next((m for m in rec.messages(infos[:1]) if isinstance(m, CameraInfo)), None) if infos else None
 
 
-def _setup(rec: Recording, camera: str, lasers: Sequence[str] | None, world_frame: str, cam2world: Any,
-           laser2world: Mapping[str, Any] | None) -> tuple[PinholeCamera, str, dict[str, np.ndarray], dict[str, str]]:
+def _colour_topic(topic: str) -> bool:
+    """Not a label or depth image topic (the simulator's ``/<camera>/labels``, ``/<camera>/depth``)."""
+    return not topic.endswith(("/labels", "/depth")) and "depth" not in topic.split("/")[-1]
+
+
+def _image_topic(rec: Recording, camera: str, image_topic: str | None) -> str:
+    """``image_topic`` (checked), else the camera's first colour image topic (raw preferred to compressed)."""
     topics = rec.topics()
-    images = [t for t, i in topics.items() if i.msgtype == "sensor_msgs/msg/Image" and rec.sensor_of(t) == camera]
+    if image_topic is not None:
+        info = topics.get(image_topic)
+        if info is None or info.msgtype not in IMAGE_TYPES:
+            raise RecordingError(f"{rec.paths[0]}: image_topic {image_topic!r} is not a sensor_msgs/Image or "
+                                 f"CompressedImage topic of the recording"
+                                 f"{'' if info is None else f' (it is {info.msgtype})'}")
+        return image_topic
+    images = sorted((t for t, i in topics.items() if i.msgtype in IMAGE_TYPES and rec.sensor_of(t) == camera
+                     and _colour_topic(t)), key=lambda t: IMAGE_TYPES.index(topics[t].msgtype))
     if not images:
-        raise RecordingError(f"{rec.paths[0]}: no sensor_msgs/Image topic of camera {camera!r}; image topics: "
-                             f"{[t for t, i in topics.items() if i.msgtype == 'sensor_msgs/msg/Image']}")
+        raise RecordingError(f"{rec.paths[0]}: no sensor_msgs/Image or CompressedImage topic of camera {camera!r}; "
+                             f"image topics: {[t for t, i in topics.items() if i.msgtype in IMAGE_TYPES]}")
+    return images[0]
+
+
+def _setup(rec: Recording, camera: str, lasers: Sequence[str] | None, world_frame: str, cam2world: Any,
+           laser2world: Mapping[str, Any] | None, image_topic: str | None = None,
+           ) -> tuple[PinholeCamera, str, dict[str, np.ndarray], dict[str, str]]:
+    topics = rec.topics()
+    image_topic = _image_topic(rec, camera, image_topic)
     if cam2world is None:
         cam = camera_from_recording(rec, camera, camera, world_frame=world_frame)
     else:
@@ -124,7 +147,7 @@ def _setup(rec: Recording, camera: str, lasers: Sequence[str] | None, world_fram
         if not tree.has_path(frame, world_frame):
             raise RecordingError(f"{rec.paths[0]}: no transform from laser {name!r} to {world_frame!r} in /tf_static")
         poses[name] = tree.get(frame, world_frame)
-    return cam, images[0], poses, {name: scan_topics[name] for name in wanted}
+    return cam, image_topic, poses, {name: scan_topics[name] for name in wanted}
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -259,11 +282,13 @@ def open_bias_inputs(path: str | Path, camera: str = "camera_0", lasers: Sequenc
                      boxes: BoxSource = "blobs", clock_offsets_ms: Mapping[str, float] | None = None,
                      world_frame: str = "world", cam2world: Any = None, laser2world: Mapping[str, Any] | None = None,
                      foreground: ForegroundParams | None = None, blob: BlobParams | None = None,
-                     tracker: BlobTrackerParams | None = None) -> BiasInputs:
+                     tracker: BlobTrackerParams | None = None, image_topic: str | None = None) -> BiasInputs:
     """Read a recording's calibration and prepare its input stream for the bias (see :func:`bias_from_recording`).
 
     ``cam2world`` (4, 4) and ``laser2world`` (name -> (4, 4)) replace the poses in the recording's ``/tf_static``
     (e.g. those of a pipeline file); ``foreground``, ``blob`` and ``tracker`` are the A1–A5 parameters.
+    ``image_topic`` is the camera's image topic (``sensor_msgs/Image`` or ``CompressedImage``; default: the
+    camera's first one that is not a label or depth image, raw images preferred).
 
     Raises
     ------
@@ -274,7 +299,8 @@ def open_bias_inputs(path: str | Path, camera: str = "camera_0", lasers: Sequenc
         raise ValueError(f"boxes: expected 'blobs' or 'truth', got {boxes!r}")
     offsets = {k: round(float(v) * 1e6) for k, v in (clock_offsets_ms or {}).items()}
     with Recording(path) as rec:
-        cam, image_topic, poses, scan_topics = _setup(rec, camera, lasers, world_frame, cam2world, laser2world)
+        cam, image_topic, poses, scan_topics = _setup(rec, camera, lasers, world_frame, cam2world, laser2world,
+                                                      image_topic)
     return BiasInputs(Path(path), cam, poses, image_topic, scan_topics, camera, boxes, offsets, foreground, blob,
                       tracker)
 
@@ -283,14 +309,16 @@ def bias_from_recording(path: str | Path, camera: str = "camera_0", lasers: Sequ
                         params: BiasParams | None = None, *, boxes: BoxSource = "blobs",
                         clock_offsets_ms: Mapping[str, float] | None = None, world_frame: str = "world",
                         cam2world: Any = None, laser2world: Mapping[str, Any] | None = None,
-                        progress: Callable[[BiasStep], None] | None = None) -> BiasRun:
+                        progress: Callable[[BiasStep], None] | None = None, image_topic: str | None = None,
+                        ) -> BiasRun:
     """Estimate a camera's horizontal bias against the lasers of a recording (seed 000, ALGORITHMS.md A0–A10).
 
     Parameters
     ----------
     path : str or Path
-        A recording with the camera's images, its ``CameraInfo``, laser scans and ``/tf_static`` poses (the
-        camera's believed pose is ``<camera>_calibrated`` when present, as the simulator writes it).
+        A recording with the camera's images (raw or compressed), its ``CameraInfo``, laser scans and
+        ``/tf_static`` poses (the camera's believed pose is ``<camera>_calibrated`` when present, as the simulator
+        writes it).
     camera : str
         Sensor name of the camera.
     lasers : sequence of str, optional
@@ -308,6 +336,8 @@ def bias_from_recording(path: str | Path, camera: str = "camera_0", lasers: Sequ
         Laser poses (default: from the recording).
     progress : callable, optional
         Called with every step.
+    image_topic : str, optional
+        The camera's image topic (default: see :func:`open_bias_inputs`).
 
     Returns
     -------
@@ -319,7 +349,8 @@ def bias_from_recording(path: str | Path, camera: str = "camera_0", lasers: Sequ
         The recording lacks the camera, its calibration, the lasers or their poses.
     """
     inputs = open_bias_inputs(path, camera, lasers, boxes=boxes, clock_offsets_ms=clock_offsets_ms,
-                              world_frame=world_frame, cam2world=cam2world, laser2world=laser2world)
+                              world_frame=world_frame, cam2world=cam2world, laser2world=laser2world,
+                              image_topic=image_topic)
     est = inputs.estimator(params)
     steps = []
     for item in inputs:

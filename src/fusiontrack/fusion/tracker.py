@@ -17,17 +17,19 @@
 2. **identity checks** [RECON, extends B17] — at a split the people are still side by side and their boxes
    overlap, and a close pass without a merge never asks the camera at all. So every pair of tracks that comes
    within ``d_contact_m`` (or merges or splits together) is *checked*: on the next camera images on which both
-   are walking targets with boxes clear of every other box, each trained classifier of the pair compares its
-   own track's box with the other one. When the mean evidence over ``check_frames`` images or more passes
-   ``check_margin``, the identities are confirmed or exchanged: the laser tracker's two ids are swapped from
-   then on, and :attr:`FusionTracker.relabels` records the exchange back to where it most likely happened
-   (the pair's last split, else its closest approach); :func:`track_fused` applies it to the states already
+   are walking targets with boxes clear of every other box, each classifier of the pair that was trained at the
+   contact (its *voters*; one trained later may have learnt the other person) compares its own track's box with
+   the other one. When the mean evidence over ``check_frames`` images or more passes ``check_margin``, the
+   identities are confirmed or exchanged: the laser tracker's two ids are swapped from then on (at most one
+   exchange per track and step: another check of the same track waits for the next image), and
+   :attr:`FusionTracker.relabels` records the exchange back to where it most likely happened (the pair's last
+   split, else its closest approach); :func:`track_fused` applies it to the states already
    returned (:func:`relabel_states`, like B17's re-linking of the merged interval);
 3. **learning** [B15] — a noncorrelated target with another target within ``d_train_m`` (1.5 m) learns from
    the camera image nearest in time: positives from its projected box (B11), negatives from the boxes of
    its ``L`` closest targets (patches centred in another box are dropped); at most once every
-   ``train_interval_s``; merged targets' classifiers are frozen, and so is a trained classifier while its
-   track waits for an identity check (it could be following the other person).
+   ``train_interval_s``; merged targets' classifiers are frozen, and so is a voter of a pending identity check
+   (its track could be following the other person).
 
 The camera image is converted only when one of these needs it (:class:`~fusiontrack.fusion.frames.LazyFrames`),
 so with no interaction the fused tracker costs what the laser one costs. Each output state names the sensors
@@ -277,17 +279,31 @@ class _NoFrames:
 
 def _assignment_gap(scores: np.ndarray) -> float:
     """Summed score of the best one-to-one assignment of rows to columns minus that of the second best (the
-    evidence appearance has for its choice); inf with a single possible assignment."""
-    n_r, n_c = scores.shape
-    k = min(n_r, n_c)
-    if k == 0:
+    evidence appearance has for its choice); inf with a single possible assignment.
+
+    The best assignment is :func:`scipy.optimize.linear_sum_assignment`'s; the second best differs from it in at
+    least one pair, so it is the best of the ``k`` problems with one of the best's pairs forbidden (the first level
+    of Murty's ranking): ``k + 1`` assignments of ``O(n^3)`` instead of ``n! / (n - k)!`` enumerated ones.
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    s = np.asarray(scores, np.float64)
+    if min(s.shape) == 0:
         return 0.0
-    s = scores if n_r <= n_c else scores.T
-    totals = np.array([s[np.arange(k), list(cols)].sum() for cols in itertools.permutations(range(s.shape[1]), k)])
-    if totals.size < 2:
-        return float("inf")
-    best2 = np.partition(totals, totals.size - 2)[-2:]
-    return float(best2[1] - best2[0])
+    s = s if s.shape[0] <= s.shape[1] else s.T  # k rows, each given a distinct column
+    rows, cols = linear_sum_assignment(s, maximize=True)
+    best = float(s[rows, cols].sum())
+    second = -np.inf
+    cost = -s
+    for r, c in zip(rows, cols, strict=True):
+        forbidden = cost.copy()
+        forbidden[r, c] = np.inf
+        try:
+            rr, cc = linear_sum_assignment(forbidden)
+        except ValueError:  # no assignment without this pair
+            continue
+        second = max(second, float(s[rr, cc].sum()))
+    return best - second if np.isfinite(second) else float("inf")
 
 
 @dataclass(slots=True)
@@ -297,6 +313,7 @@ class _Check:
     swap_from_ns: int  # where an exchange would have begun: their last split, else their closest approach
     closest_m: float
     near_ns: int  # last step the two were within d_train_m
+    voters: frozenset[int]  # the ids whose classifiers were trained at the contact: only they give evidence
     split_seen: bool = False
     evidence: float = 0.0  # summed per-classifier evidence for the current identities
     n: int = 0
@@ -479,8 +496,8 @@ class FusionTracker:
         near = d.min(axis=1) < p.d_train_m
         interval = p.train_interval_s * 1e9
         # an untrained target learns from every image, a trained one every ``train_interval_s``
-        # a trained target waiting for an identity check does not learn (it could be learning the other one)
-        waiting = {tid for pair in self._checks for tid in pair}
+        # a voter of a pending identity check does not learn (it could be learning the other one)
+        waiting = {tid for c in self._checks.values() for tid in c.voters}
         learners = [k for k, s in enumerate(states)
                     if near[k] and s.situation in _LEARNING and s.sensors
                     and (not self.bank.is_trained(s.track_id)
@@ -526,10 +543,13 @@ class FusionTracker:
         """Open, feed and decide the identity checks of pairs of tracks that came into contact.
 
         A pair is opened when its tracks come within ``d_contact_m`` or merge or split together. On every camera
-        image on which both are walking targets (not merged) with clear boxes (``max_overlap``), each trained
-        classifier of the two gives its evidence, its confidence on its own track's box minus that on the other
-        box. After ``check_frames`` images, a mean evidence beyond ``± check_margin`` keeps the identities or
-        exchanges them (:meth:`_exchange`); the states of this step are returned with the exchange applied.
+        image on which both are walking targets (not merged) with clear boxes (``max_overlap``), each of the two
+        classifiers that was trained when the check opened (its voters; a check without any is reopened at the
+        next contact) gives its evidence, its confidence on its own track's box minus that on the other box.
+        After ``check_frames`` images, a mean evidence beyond ``± check_margin`` keeps the identities or
+        exchanges them (:meth:`_exchange`). A track is exchanged at most once per step (a later check of it waits
+        for the next image: its evidence was reset and this step's boxes carry the old ids); the states of this
+        step are returned with the exchanges applied one after the other, as the laser tracker's ids were.
         """
         p = self.params
         ids = np.array([st.track_id for st in states], np.int64)
@@ -548,8 +568,11 @@ class FusionTracker:
         for pair, split in contacts.items():
             dist = float(d[row[pair[0]], row[pair[1]]])
             c = checks.get(pair)
-            if c is None:
-                checks[pair] = _Check(t_ns, dist, t_ns, split)
+            if c is None or not c.voters:
+                # a classifier trained only after the contact may have learnt the other person: it never votes.
+                # A check without voters is (re)opened at each contact until one of the two has a classifier.
+                voters = frozenset(tid for tid in pair if self.bank.is_trained(tid))
+                checks[pair] = _Check(t_ns, dist, t_ns, voters, split or (c is not None and c.split_seen))
                 continue
             if split:  # an exchange, if any, most likely happened at the (last) split
                 c.swap_from_ns, c.split_seen = t_ns, True
@@ -572,7 +595,7 @@ class FusionTracker:
             return states
         walking = np.array([st.situation != _MERGED for st in states])
         todo = [pair for pair, c in checks.items() if c.image_ns != t_img and walking[row[pair[0]]]
-                and walking[row[pair[1]]] and (self.bank.is_trained(pair[0]) or self.bank.is_trained(pair[1]))]
+                and walking[row[pair[1]]] and any(self.bank.is_trained(tid) for tid in c.voters)]
         if not todo:
             return states
         t0 = time.perf_counter()
@@ -582,14 +605,19 @@ class FusionTracker:
         todo = [pair for pair in todo if ok[row[pair[0]]] and ok[row[pair[1]]]
                 and occluded[row[pair[0]]] <= p.max_overlap and occluded[row[pair[1]]] <= p.max_overlap]
         img = self._image(t_ns) if todo else None
-        exchanged = []
+        exchanged: list[tuple[int, int]] = []
+        busy: set[int] = set()  # ids exchanged at this step
         if img is not None:
             for pair in todo:
+                if busy.intersection(pair):
+                    # its evidence was reset by the exchange, and this step's boxes are under the old ids:
+                    # it waits for the next image (at most one exchange per id and step)
+                    continue
                 c = checks[pair]
-                trained = [tid for tid in pair if self.bank.is_trained(tid)]
-                sc = self.bank.box_scores(img.pixels, boxes[[row[pair[0]], row[pair[1]]]], trained)  # (2, n_tr)
-                own = np.array([pair.index(tid) for tid in trained])
-                ev = sc[own, np.arange(len(trained))] - sc[1 - own, np.arange(len(trained))]
+                voters = [tid for tid in pair if tid in c.voters and self.bank.is_trained(tid)]
+                sc = self.bank.box_scores(img.pixels, boxes[[row[pair[0]], row[pair[1]]]], voters)  # (2, n_v)
+                own = np.array([pair.index(tid) for tid in voters])
+                ev = sc[own, np.arange(len(voters))] - sc[1 - own, np.arange(len(voters))]
                 if not np.isfinite(ev).all():
                     continue
                 self._used.update(pair)
@@ -600,24 +628,21 @@ class FusionTracker:
                 if c.n >= p.check_frames and abs(mean) >= p.check_margin:
                     del checks[pair]
                     self.stats.checks += 1
-                    if mean < 0:
-                        exchanged.append((pair, c, mean))
-        for (a, b), c, mean in exchanged:
-            self._exchange(a, b, c.swap_from_ns, t_ns, mean)
+                    if mean < 0 and self._exchange(pair[0], pair[1], c.swap_from_ns, t_ns, mean):
+                        exchanged.append(pair)
+                        busy.update(pair)
         self.stats.camera_s += time.perf_counter() - t0
-        if not exchanged:
-            return states
-        swap: dict[int, int] = {}
-        for (a, b), _, _ in exchanged:
-            sa, sb = swap.get(a, a), swap.get(b, b)
-            swap[a], swap[b] = sb, sa
-        return [dataclasses.replace(st, track_id=swap[st.track_id]) if st.track_id in swap else st for st in states]
+        for a, b in exchanged:  # in the order the laser tracker's ids were exchanged
+            states = [dataclasses.replace(st, track_id=b if st.track_id == a else a)
+                      if st.track_id in (a, b) else st for st in states]
+        return states
 
-    def _exchange(self, a: int, b: int, from_ns: int, t_ns: int, evidence: float) -> None:
+    def _exchange(self, a: int, b: int, from_ns: int, t_ns: int, evidence: float) -> bool:
         """The laser tracks ``a`` and ``b`` follow each other's person: exchange their ids from now on and
-        record the exchange since ``from_ns`` (:attr:`relabels`)."""
+        record the exchange since ``from_ns`` (:attr:`relabels`). False (nothing done) when the laser tracker
+        cannot exchange them."""
         if not self.laser.exchange_ids(a, b):
-            return
+            return False
         for pair, c in self._checks.items():  # evidence gathered under the old ids no longer holds
             if a in pair or b in pair:
                 c.evidence, c.n = 0.0, 0
@@ -625,6 +650,7 @@ class FusionTracker:
         self.stats.exchanges += 1
         self.events.append(Event(t_ns, self.camera_name, "identity", t_ns, track_ids=(a, b),
                                  attributes={"exchanged": True, "from_ns": int(from_ns), "evidence": evidence}))
+        return True
 
     # ---------------------------------------------------------------------------------------------
     def _score_map_ll(self, t_ns: int, track_ids: np.ndarray, centres_m: np.ndarray) -> np.ndarray | None:
@@ -721,7 +747,7 @@ def _image_topic(rec: Any, camera_topic: str | None) -> str | None:
 def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCamera | None = None,
                       lasers: Mapping[str, Any] | None = None, learning: BiasLearning | None = None,
                       clock_corrections_ns: Mapping[str, int] | None = None, world_frame: str = "world",
-                      ) -> CameraBias:
+                      image_topic: str | None = None) -> CameraBias:
     """Learn a camera's horizontal bias against the lasers over the beginning of a recording (seed 000, A0–A10).
 
     Like :func:`~fusiontrack.calibration.bias_run.bias_from_recording`, but stops as soon as the bias has
@@ -733,7 +759,8 @@ def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCame
     path : str or Path
         The recording.
     camera_name : str
-        Sensor name of the camera (its ``sensor_msgs/Image`` topic and ``CameraInfo`` are used).
+        Sensor name of the camera (its image topic, ``sensor_msgs/Image`` or ``CompressedImage``, and its
+        ``CameraInfo`` are used).
     camera : PinholeCamera, optional
         The camera as calibrated (default: the recording's, ``<camera>_calibrated`` preferred).
     lasers : mapping of laser name -> (4, 4) laser2world, optional
@@ -742,6 +769,9 @@ def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCame
     clock_corrections_ns : mapping of sensor -> int, optional
         Added to each sensor's stamps (as for :func:`track_fused`).
     world_frame : str
+    image_topic : str, optional
+        The camera's image topic (default: its first one that is not a label or depth image,
+        :func:`~fusiontrack.calibration.bias_run.open_bias_inputs`); :func:`track_fused` passes the one it fuses.
 
     Returns
     -------
@@ -761,7 +791,8 @@ def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCame
     offsets_ms = {k: -v / 1e6 for k, v in (clock_corrections_ns or {}).items()}
     inputs = open_bias_inputs(path, camera_name, None if lasers is None else list(lasers),
                               clock_offsets_ms=offsets_ms, world_frame=world_frame,
-                              cam2world=None if camera is None else camera.cam2world, laser2world=lasers)
+                              cam2world=None if camera is None else camera.cam2world, laser2world=lasers,
+                              image_topic=image_topic)
     if camera is not None:
         inputs = dataclasses.replace(inputs, camera=camera)
     est = inputs.estimator(lp.params)
@@ -889,7 +920,8 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
                                                  background="learn", detector_params=detector_params)
         bias = None
         if camera is not None and learning is not None and first_path is not None:
-            bias = _learn_bias(first_path, cam_sensor, camera, poses, learning, corrections, world_frame)
+            bias = _learn_bias(first_path, cam_sensor, image_topic, camera, poses, learning, corrections,
+                               world_frame)
             if bias is not None:
                 camera = bias.corrected_camera
                 if timings is not None:
@@ -917,12 +949,14 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
     return relabel_states(states, trk.relabels), events, trk.stats
 
 
-def _learn_bias(path: str | Path, cam_sensor: str, camera: PinholeCamera, poses: Mapping[str, np.ndarray],
-                learning: BiasLearning, corrections: Mapping[str, int], world_frame: str) -> CameraBias | None:
+def _learn_bias(path: str | Path, cam_sensor: str, image_topic: str | None, camera: PinholeCamera,
+                poses: Mapping[str, np.ndarray], learning: BiasLearning, corrections: Mapping[str, int],
+                world_frame: str) -> CameraBias | None:
     """:func:`learn_camera_bias` for :func:`track_fused`: None (with a warning) when it cannot be learnt."""
     try:
         bias = learn_camera_bias(path, cam_sensor, camera=camera, lasers=poses, learning=learning,
-                                 clock_corrections_ns=corrections, world_frame=world_frame)
+                                 clock_corrections_ns=corrections, world_frame=world_frame,
+                                 image_topic=image_topic)
     except (RecordingError, ValueError) as err:  # no usable calibration or images: fuse as calibrated
         log.warning("camera bias not learnt (%s): the camera is used as calibrated", err)
         return None
