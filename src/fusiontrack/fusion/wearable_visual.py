@@ -60,6 +60,7 @@ from ..io.recording import Recording
 from ..types import Event, Image
 from ..vision.blobs import BlobParams, extract_blobs
 from ..vision.compressive import CompressiveParams, CompressiveTracker, MultiTemplateParams, MultiTemplateTracker
+from ..vision.people import box_iou
 from .wearable_correct import Correction
 from .wearable_data import CameraModel, PhoneTrack
 
@@ -160,15 +161,6 @@ def torso_homography(camera: PinholeCamera, height_m: float) -> np.ndarray:
     return H / H[2, 2] if abs(H[2, 2]) > 1e-12 else H
 
 
-def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """IoU of box ``a (4,)`` with boxes ``b (n, 4)``."""
-    iw = np.clip(np.minimum(a[2], b[:, 2]) - np.maximum(a[0], b[:, 0]), 0, None)
-    ih = np.clip(np.minimum(a[3], b[:, 3]) - np.maximum(a[1], b[:, 1]), 0, None)
-    inter = iw * ih
-    union = (a[2] - a[0]) * (a[3] - a[1]) + (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1]) - inter
-    return np.where(union > 0, inter / np.maximum(union, 1e-12), 0.0)
-
-
 class _CameraState:
     """A camera's projection (C9), its foreground model and its trackers' pairs."""
 
@@ -251,10 +243,9 @@ def _person_blob(state: _CameraState, boxes: np.ndarray, pred: np.ndarray, other
     if near is None:  # a tracker starts on a whole person, not one cut by the image border
         ok &= (boxes[:, 0] >= p.edge_margin_px) & (boxes[:, 1] >= p.edge_margin_px) \
             & (boxes[:, 2] <= w_img - p.edge_margin_px) & (boxes[:, 3] <= h_img - p.edge_margin_px)
-    for other in others:
-        ok &= _iou(other, boxes) <= p.start_clear_iou
+    ok &= np.all(box_iou(others, boxes) <= p.start_clear_iou, axis=0)
     if near is None:
-        score = np.where(ok, _iou(pred, boxes), -1.0)
+        score = np.where(ok, box_iou(pred[None], boxes)[0], -1.0)
         k = int(np.argmax(score))
         return boxes[k] if score[k] >= p.blob_min_overlap else None
     c = 0.5 * (boxes[:, :2] + boxes[:, 2:])
@@ -352,7 +343,7 @@ def track_visual(path: Any, cameras: dict[str, CameraModel], phones: dict[str, P
                             and p.min_box_height_px <= bh <= p.max_box_fraction * state.size[1]):
                         continue
                     others = np.array([where[o][2] for o in where if o != ph]).reshape(-1, 4)
-                    if others.size and np.nanmax(_iou(pred, others)) > p.start_clear_iou:
+                    if others.size and np.nanmax(box_iou(pred[None], others)) > p.start_clear_iou:
                         continue
                     box = _person_blob(state, blobs, pred, others, p)
                     if box is None:
@@ -389,7 +380,7 @@ def track_visual(path: Any, cameras: dict[str, CameraModel], phones: dict[str, P
                         out = blob.astype(np.float64)
                 if abs(scale - 1.0) > p.rescale_after and r.status == "ok" and r.sim >= 0.3:
                     others = np.array([where[o][2] for o in where if o != ph]).reshape(-1, 4)
-                    clear = not others.size or np.nanmax(_iou(out, others)) <= p.start_clear_iou
+                    clear = not others.size or np.nanmax(box_iou(out[None], others)) <= p.start_clear_iou
                     inside = out[0] >= 0 and out[1] >= 0 and out[2] <= state.size[0] and out[3] <= state.size[1]
                     if clear and inside:  # the person's distance changed: a new CT at the new size [RECON]
                         try:
