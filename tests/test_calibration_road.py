@@ -28,7 +28,6 @@ from fusiontrack.io.recording import Recording
 from fusiontrack.io.writer import RecordingWriter
 from fusiontrack.types import CameraInfo, LaserScan, Transform
 
-ROAD30 = Path("/tmp/road30")
 DIST = (-0.2, 0.05, 0.001, -0.001, 0.0)
 # A camera on a 9 m pole beside the road, with barrel distortion; a laser at (15, -4) turned by 30 deg.
 CAMERA = PinholeCamera.looking_at((0.0, -8.0, 9.0), (20.0, 0.0, 0.0), fx=1000, fy=1000, width=1280, height=720,
@@ -271,10 +270,19 @@ def test_a_mislabelled_point_gives_a_warning(caplog):
 
 
 @pytest.fixture(scope="module")
-def road30_calibration() -> RoadCalibration:
-    if not (ROAD30 / "ground_truth").is_dir():
-        pytest.skip(f"{ROAD30} (fusiontrack simulate road --seconds 30 -o {ROAD30}) is not there")
-    return road_calibration_from_recording(ROAD30)
+def road_recording(tmp_path_factory) -> Path:
+    """10 s of the simulated `road`: 2 cameras, 2 lasers, ground truth."""
+    from fusiontrack.sim.scenario import load_scenario
+    from fusiontrack.sim.simulator import simulate
+
+    path = tmp_path_factory.mktemp("road_calibration") / "road10"
+    simulate(load_scenario("road").with_overrides(seconds=10, seed=0), path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def road_calibration(road_recording) -> RoadCalibration:
+    return road_calibration_from_recording(road_recording)
 
 
 def _tree(rec: Recording) -> TransformTree:
@@ -284,14 +292,14 @@ def _tree(rec: Recording) -> TransformTree:
     return tree
 
 
-def test_road_recording_cameras_map_true_positions_back(road30_calibration):
+def test_road_recording_cameras_map_true_positions_back(road_calibration, road_recording):
     # The simulator's truth: agents' road positions projected with the TRUE camera pose (tf "camera_c"); the
     # calibration is built from the believed pose ("camera_c_calibrated") and CameraInfo.
-    calib = road30_calibration
+    calib = road_calibration
     assert set(calib.cameras) == {"camera_0", "camera_1"}
     assert set(calib.lasers) == {"laser_0", "laser_1"}
     assert calib.camera("camera_0").residual is None
-    with Recording(ROAD30) as rec:
+    with Recording(road_recording) as rec:
         tree = _tree(rec)
         for name in calib.cameras:
             # the road scenario has no yaw bias: believed == true pose
@@ -308,16 +316,16 @@ def test_road_recording_cameras_map_true_positions_back(road30_calibration):
             assert np.all(np.linalg.eigvalsh(cov) > 0)
 
 
-def test_road_recording_lasers_put_the_wall_and_pillars_in_place(road30_calibration):
+def test_road_recording_lasers_put_the_wall_and_pillars_in_place(road_calibration, road_recording):
     # world.json: a wall along y = 12 for |x| <= 30 and pillars of radius 0.12 m. The first scans (no vehicle
     # yet) mapped with the tf-derived transform must land on them.
-    world = json.loads((ROAD30 / "ground_truth" / "world.json").read_text())
+    world = json.loads((road_recording / "ground_truth" / "world.json").read_text())
     pillars = np.array(world["pillars"])
     (((x0, y0), (x1, _)),) = world["walls"]
-    with Recording(ROAD30) as rec:
+    with Recording(road_recording) as rec:
         for laser in ("laser_0", "laser_1"):
             scan = next(iter(rec.messages([f"/{laser}/scan"])))
-            pts = road30_calibration.laser_to_road(laser, scan_to_points(scan))
+            pts = road_calibration.laser_to_road(laser, scan_to_points(scan))
             pts = pts[np.isfinite(pts[:, 0])]
             to_pillar = np.min(np.abs(np.linalg.norm(pts[:, None] - pillars[None, :, :2], axis=2)
                                       - pillars[None, :, 2]), axis=1)
@@ -380,3 +388,72 @@ def test_recording_calibration_uses_the_believed_pose_and_removes_distortion(bia
         road_calibration_from_recording(path, cameras=["camera_9"])
     with pytest.raises(RecordingError, match="laser_7"):
         road_calibration_from_recording(path, lasers=["laser_7"])
+
+
+def test_calibrate_road_command_recovers_the_road_recordings_true_poses(road_recording, tmp_path):
+    # A site survey of the simulated road: markers on the road seen by each camera (their pixels from the TRUE
+    # pose and lens, 1 px noise) and reflectors seen by each laser (in its true frame, 2 cm noise). The
+    # calibration written by the command must put the cameras' and lasers' views of the road where the truth is.
+    from typer.testing import CliRunner
+
+    from fusiontrack.cli import app
+
+    rng = np.random.default_rng(3)
+    rows = []
+    with Recording(road_recording) as rec:
+        tree = _tree(rec)
+        cams = {}
+        for name in ("camera_0", "camera_1"):
+            info = next(m for m in rec.messages([f"/{name}/camera_info"]))
+            cams[name] = PinholeCamera.from_camera_info(info, tree.get("world", name))
+        lasers = {name: tree.get(name, "world") for name in ("laser_0", "laser_1")}
+    gx, gy = np.meshgrid(np.arange(-40.0, 41.0, 5.0), [-5.0, -1.75, 1.75, 5.0])
+    grid = np.column_stack([gx.ravel(), gy.ravel()])
+    for name, cam in cams.items():
+        uv = cam.project(floor(grid))
+        inside = np.all(np.isfinite(uv), axis=1) & np.all((uv > 5) & (uv < (cam.width - 5, cam.height - 5)), axis=1)
+        uv = uv[inside] + rng.normal(0, 1.0, (int(inside.sum()), 2))
+        rows += [f"{name},camera,{u:.3f},{v:.3f},{x},{y}" for (u, v), (x, y) in zip(uv, grid[inside], strict=True)]
+    for name, T in lasers.items():
+        R, t = T[:2, :2], T[:2, 3]
+        xy = np.array([[-8.0, -6.5], [8.0, -6.5], [0.0, 6.5], [-4.0, 12.0], [4.0, 12.0]]) + t * [1, 0]
+        local = (xy - t) @ R + rng.normal(0, 0.02, xy.shape)
+        rows += [f"{name},laser,{a:.4f},{b:.4f},{x},{y}" for (a, b), (x, y) in zip(local, xy, strict=True)]
+    points = write_csv(tmp_path / "survey.csv", rows)
+    out = tmp_path / "road_calibration.json"
+    result = CliRunner().invoke(app, ["calibrate-road", str(points), "-o", str(out), "--lenses",
+                                      str(road_recording)])
+    assert result.exit_code == 0, result.output
+    assert "camera_0" in result.output
+    assert "laser_1" in result.output
+    assert "rms px" in result.output
+    calib = RoadCalibration.load(out)
+    assert set(calib.cameras) == set(cams)
+    assert set(calib.lasers) == set(lasers)
+    for name, cam in cams.items():
+        assert calib.camera(name).residual.rms_px < 2.0
+        near = grid[np.abs(grid[:, 0] - cam.cam2world[0, 3]) < 30]  # the road within 30 m of the pole
+        uv = cam.project(floor(near))
+        ok = np.all(np.isfinite(uv), axis=1)
+        err = np.linalg.norm(calib.image_to_road(name, uv[ok]) - near[ok], axis=1)
+        assert np.median(err) < 0.1
+        assert err.max() < 0.5
+    for name, T in lasers.items():
+        fitted = calib.laser(name)
+        np.testing.assert_allclose(fitted.t, T[:2, 3], atol=0.05)
+        assert abs(math.degrees(fitted.yaw_rad - math.atan2(T[1, 0], T[0, 0]))) < 0.5
+
+
+def test_calibrate_road_command_names_a_bad_file(tmp_path):
+    from typer.testing import CliRunner
+
+    from fusiontrack.cli import app
+
+    bad = write_csv(tmp_path / "bad.csv", ["camera_0,camera,10,20,1,2", "camera_0,camera,30,40,3,4"])
+    result = CliRunner().invoke(app, ["calibrate-road", str(bad), "-o", str(tmp_path / "c.json")])
+    assert result.exit_code != 0
+    message = str(result.exception) + result.output
+    assert "bad.csv" in message
+    assert "camera_0" in message
+    assert "at least 4" in message
+    assert not (tmp_path / "c.json").exists()

@@ -867,6 +867,49 @@ def calibrate(
                   + (f"; written to {report.written}" if report.written else " (dry run: not written)"))
 
 
+@app.command(name="calibrate-road")
+def calibrate_road_command(
+    points: Annotated[Path, typer.Argument(help="Control points CSV with the header sensor,kind,a,b,x,y: kind camera "
+                                           "-> a,b = pixel (u, v); kind laser -> a,b = the point in the laser's "
+                                           "frame (m); x,y = its surveyed road coordinates (m).")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Calibration file (JSON) for `track --pipeline "
+                                         "traffic --calibration`.")],
+    lenses: Annotated[Path | None, typer.Option(help="A recording whose CameraInfo gives each camera's lens (K, "
+                                                "distortion): its pixels are undistorted before the fit.")] = None,
+    refine: Annotated[bool, typer.Option(help="Refine each camera's homography by Levenberg-Marquardt on the "
+                                         "pixel error.")] = True,
+) -> None:
+    """Calibrate the cameras and lasers of a road into one road frame from surveyed control points (seed 003, D1).
+
+    Cameras get a ground-plane homography (at least 4 points, not collinear), lasers a rigid 2-D transform (at
+    least 2 points); the residuals at the control points are printed per sensor and saved with the calibration.
+    """
+    from .calibration.road import calibrate_road, residual_table
+    from .io.recording import Recording
+    from .types import CameraInfo
+
+    lens_models: dict[str, CameraInfo] = {}
+    if lenses is not None:
+        with Recording(lenses) as rec:
+            topics = {rec.sensor_of(t): t for t, i in rec.topics().items() if i.msgtype == "sensor_msgs/msg/CameraInfo"}
+            if not topics:
+                raise ConfigError(f"--lenses {lenses}: the recording has no CameraInfo topic")
+            for name, topic in topics.items():
+                info = next((m for m in rec.messages([topic]) if isinstance(m, CameraInfo)), None)
+                if info is not None:
+                    lens_models[name] = info
+    calib = calibrate_road(points, lenses=lens_models, refine=refine)
+    saved = calib.save(output)
+    table = Table(title=f"road calibration from {points} (residuals at the control points)")
+    for col in ("sensor", "kind", "points", "rms m", "max m", "rms px", "max px"):
+        table.add_column(col, justify="left" if col in ("sensor", "kind") else "right")
+    for r in residual_table(calib):
+        values = (r["rms_m"], r["max_m"], r["rms_px"], r["max_px"])
+        table.add_row(r["sensor"], r["kind"], str(r["n"]), *("-" if v != v else f"{v:.3f}" for v in values))
+    console.print(table)
+    console.print(f"calibration of {len(calib.cameras)} camera(s) and {len(calib.lasers)} laser(s) -> {saved}")
+
+
 @app.command(name="train-classifier")
 def train_classifier(
     output: Annotated[Path | None, typer.Option("--output", "-o", help="Where to write the model (JSON); default: "
