@@ -344,7 +344,8 @@ def track(
     time_source: Annotated[str, typer.Option("--time", help="header (capture stamps) or log (recorder).")] = "header",
     video: Annotated[bool, typer.Option(help="Also write a bird's-eye video with the tracks (people-camera: the "
                                         "overlay video).")] = True,
-    seed: Annotated[int, typer.Option(help="Random seed of the particle filters.")] = 0,
+    seed: Annotated[int | None, typer.Option(help="Random seed of the particle filters (default 0, or for traffic "
+                                             "and wearable the pipeline file's own seed).")] = None,
     area: Annotated[str, typer.Option(help="Covered area, where people appear and leave: 'auto' (from the "
                                       "learnt laser backgrounds), 'none' (a moving scanner: no edge) or "
                                       "x_min,y_min,x_max,y_max in metres.")] = "auto",
@@ -369,6 +370,10 @@ def track(
                                                )] = None,
     compare: Annotated[bool, typer.Option(help="traffic: also run camera-only, laser-only and fusion without the "
                                           "particle filter, and score them all when there is ground truth.")] = False,
+    calibration: Annotated[Path | None, typer.Option(help="traffic: road calibration JSON from `fusiontrack "
+                                                     "calibrate-road` (or [traffic] calibration = FILE in the "
+                                                     "pipeline file); the sensors it names are posed by it instead "
+                                                     "of the recording's /tf_static.")] = None,
 ) -> None:
     """Track people in a recording; writes tracks.csv, tracks.jsonl (states + events) and tracks.mp4.
 
@@ -383,19 +388,25 @@ def track(
         raise ConfigError(f"--pipeline: expected one of {', '.join(PIPELINES)}, got {pipeline!r}")
     if time_source not in ("header", "log"):
         raise ConfigError(f"--time: expected 'header' or 'log', got {time_source!r}")
-    traffic_only = {"--geometry": geometry is not None, "--rules": rules is not None, "--compare": compare}
+    traffic_only = {"--geometry": geometry is not None, "--rules": rules is not None, "--compare": compare,
+                    "--calibration": calibration is not None}
     if pipeline != "traffic" and any(traffic_only.values()):
         given = ", ".join(k for k, v in traffic_only.items() if v)
         raise ConfigError(f"{given}: only for --pipeline traffic (got --pipeline {pipeline})")
     if not camera_bias and pipeline != "people":
         raise ConfigError(f"--no-camera-bias: only for --pipeline people (got --pipeline {pipeline})")
+    people_only = {"--tracker": tracker_kind != "pf", "--area": area != "auto"}
+    if pipeline in ("traffic", "wearable") and any(people_only.values()):
+        given = ", ".join(k for k, v in people_only.items() if v)
+        raise ConfigError(f"{given}: only for the people pipelines (got --pipeline {pipeline})")
     if pipeline == "wearable":
         _track_wearable(recordings, output, config=config, seed=seed)
         return
     if pipeline == "traffic":
         _track_traffic(recordings, output, config=config, geometry=geometry, rules=rules, compare=compare,
-                       video=video, time_source=time_source)
+                       video=video, time_source=time_source, seed=seed, calibration=calibration)
         return
+    seed = 0 if seed is None else seed
     if pipeline == "people-camera":
         if config is not None:
             raise ConfigError("--config: the people-camera pipeline takes no pipeline file yet (its camera comes "
@@ -473,16 +484,30 @@ def track(
 
         drawn = render_preview(recordings, output / "tracks.mp4", tracks=states)
         console.print(f"video: {output / 'tracks.mp4'} ({drawn.frames} frames)")
+        if pipeline == "people" and fstats.camera:  # laser points, boxes, ids, situations, live bias
+            from .viz.fused_overlay import render_fused_overlay
+
+            lasers = None  # every laser, unless the pipeline file chose some
+            if topics:
+                from .io.recording import Recording
+
+                with Recording(recordings) as rec:
+                    lasers = [rec.sensor_of(t) for t in topics]
+            ov = render_fused_overlay(recordings, output / "overlay.mp4", states, camera=fstats.camera,
+                                      image_topic=camera_topic, bias_history=fstats.bias, events=events,
+                                      time_source=time_source, clock_corrections_ns=cfg.clock_corrections_ns(),
+                                      lasers=lasers)
+            console.print(f"overlay: {output / 'overlay.mp4'} ({ov.frames} frames)")
 
 
-def _track_wearable(sources: list[Path], output: Path, *, config: Path | None, seed: int) -> None:
+def _track_wearable(sources: list[Path], output: Path, *, config: Path | None, seed: int | None) -> None:
     """``track --pipeline wearable``: seed 002's pipeline; per phone the corrected trajectory, boxes and events."""
     from .fusion.wearable import run_wearable
 
     if len(sources) != 1:
         raise ConfigError(f"wearable: one recording at a time (got {len(sources)})")
     cfg = _load_config(config)
-    options = {"seed": seed, **cfg.wearable}
+    options = {"seed": 0, **cfg.wearable, **({} if seed is None else {"seed": seed})}  # --seed wins
     with progress() as bar:
         task = bar.add_task("tracking (wearable)", total=None)
         summary = run_wearable(sources[0], output, **options)
@@ -501,7 +526,8 @@ def _track_wearable(sources: list[Path], output: Path, *, config: Path | None, s
 
 
 def _track_traffic(sources: list[Path], output: Path, *, config: Path | None, geometry: Path | None,
-                   rules: Path | None, compare: bool, video: bool, time_source: str) -> None:
+                   rules: Path | None, compare: bool, video: bool, time_source: str, seed: int | None,
+                   calibration: Path | None) -> None:
     """``track --pipeline traffic``: seed 003's pipeline; writes tracks, events, summary and report.html."""
     from .fusion.traffic import TrafficParams
     from .fusion.traffic_run import run_traffic
@@ -509,11 +535,22 @@ def _track_traffic(sources: list[Path], output: Path, *, config: Path | None, ge
     if len(sources) != 1:
         raise ConfigError(f"traffic: one recording at a time (got {len(sources)})")
     cfg = _load_config(config)
-    params = TrafficParams.from_mapping(cfg.traffic, f"{config}: [traffic]") if cfg.traffic else TrafficParams()
+    table = dict(cfg.traffic or {})
+    in_file = table.pop("calibration", None)
+    if calibration is None and in_file is not None:  # relative to the pipeline file
+        if not isinstance(in_file, str) or not in_file:
+            raise ConfigError(f"{config}: [traffic] calibration: expected a file name, got {in_file!r}")
+        calibration = config.parent / in_file if config is not None else Path(in_file)
+    params = TrafficParams.from_mapping(table, f"{config}: [traffic]") if table else TrafficParams()
+    if seed is not None:  # --seed wins over the pipeline file's [traffic.tracker] seed
+        from dataclasses import replace
+
+        params = replace(params, tracker=replace(params.tracker, seed=seed))
     with progress() as bar:
         task = bar.add_task("tracking (traffic)", total=1.0)
         summary = run_traffic(sources[0], output, geometry=geometry, rules=rules, params=params, compare=compare,
-                              video=video, time_source=time_source, progress=lambda f: bar.update(task, completed=f))
+                              video=video, time_source=time_source, progress=lambda f: bar.update(task, completed=f),
+                              calibration=calibration)
     console.print(f"{summary['tracks']} tracks over {summary['duration_s']:.1f} s at {summary['x_real_time']:.1f}x "
                   f"real time; events {summary['events'] or 'none'} -> {output}")
     if "metrics" in summary:
