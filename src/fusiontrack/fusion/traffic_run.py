@@ -73,18 +73,25 @@ def evaluate_traffic(result: TrafficResult, path: str | Path, *, area: Any = Non
 def run_traffic(recording: str | Path, output: str | Path, *, geometry: Any = None, rules: Any = None,
                 params: TrafficParams | None = None, compare: bool = False, video: bool = True,
                 time_source: str = "header", progress: Callable[[float], None] | None = None,
-                variants: Sequence[str] | None = None) -> dict[str, Any]:
+                variants: Sequence[str] | None = None, calibration: Any = None) -> dict[str, Any]:
     """Track, write the outputs (module docstring) and return the summary.
 
     ``compare`` also runs the camera-only, laser-only and fusion-without-particle-filter variants (scored when
-    the recording has ground truth).
+    the recording has ground truth). ``calibration`` (a :class:`~fusiontrack.calibration.road.RoadCalibration`
+    or its JSON file, from ``fusiontrack calibrate-road``) poses the sensors it names instead of the
+    recording's ``/tf_static``; its residuals go into the summary and the report.
     """
+    if isinstance(calibration, str | Path):
+        from ..calibration.road import RoadCalibration
+
+        calibration = RoadCalibration.load(calibration)
     recording, output = Path(recording), Path(output)
     p = params or TrafficParams()
     if variants is None:
         variants = tuple(VARIANTS) if compare else ("fusion_pf",)
     result = track_traffic(recording, geometry=geometry, rules=rules, params=p, variants=variants,
-                           time_source=time_source, progress=progress)
+                           time_source=time_source, progress=progress,
+                           **({} if calibration is None else {"calibration": calibration}))
     output.mkdir(parents=True, exist_ok=True)
     states = result.states["fusion_pf"] if "fusion_pf" in result.states else next(iter(result.states.values()))
     write_tracks_csv(output / "tracks.csv", states)
@@ -99,6 +106,10 @@ def run_traffic(recording: str | Path, output: str | Path, *, geometry: Any = No
         "tracks": len({s.track_id for s in states}),
         "events": _count_kinds(result.scene_events),
     }
+    if calibration is not None:
+        from ..calibration.road import residual_table
+
+        summary["calibration"] = {"source": calibration.source, "residuals": residual_table(calibration)}
     area = None
     world = recording / "ground_truth" / "world.json"
     if world.is_file():
@@ -145,6 +156,10 @@ def _report(path: Path, recording: Path, result: TrafficResult, summary: dict[st
                 [{"kind": k, **v} for k, v in summary["incidents"].items()],
                 note="onset latency: event start minus incident start; alarm latency: when the rule fired "
                      "(after its hold time) minus incident start.")
+    if "calibration" in summary:
+        r.table("Sensor calibration (residuals at the control points)", summary["calibration"]["residuals"],
+                note=f"from {summary['calibration']['source']}; sensors it does not name are posed by the "
+                     "recording's /tf_static.")
     spent = result.timings_s
     r.table("Time spent", [{"part": k, "seconds": v, "CPU seconds": result.cpu_s.get(k, math.nan),
                             "ms per recording second": 1e3 * v / result.duration_s if result.duration_s else math.nan}
