@@ -77,6 +77,9 @@ def _optional_array(value: Any, dtype: Any, shape: tuple[int | None, ...] | None
     return None if value is None else _frozen_array(value, dtype, shape, name)
 
 
+_EMPTY: Mapping[str, Any] = MappingProxyType({})
+
+
 def _set(obj: object, name: str, value: Any) -> None:
     object.__setattr__(obj, name, value)
 
@@ -455,6 +458,55 @@ class Detection:
         _set(self, "features", MappingProxyType({k: _frozen_array(v, None, None, f"Detection.features[{k!r}]")
                                                   for k, v in self.features.items()}))
 
+    @staticmethod
+    def trusted(t_ns: int, sensor: str, position_m: np.ndarray | None = None, covariance_m2: np.ndarray | None = None,
+                box_px: np.ndarray | None = None, score: float = 1.0, cls: str = ObjectClass.UNKNOWN,
+                class_probs: Mapping[str, float] | None = None, features: Mapping[str, np.ndarray] | None = None
+                ) -> Detection:
+        """A detection from values a pipeline component already holds in the documented form, without checks or
+        copies (the hot path of the branches and the fusion; ``Detection(...)`` is the checked constructor).
+
+        The caller guarantees: ``t_ns`` an int; ``position_m`` a float64 ``(2,)`` array and ``covariance_m2`` a
+        float64 ``(2, 2)`` one (or both ``None`` with a ``box_px``), ``box_px`` float64 ``(4,)`` or ``None``; ``cls`` an
+        :class:`ObjectClass` value; ``class_probs`` keys :class:`ObjectClass` values; ``features`` numpy arrays.
+        The arrays are not copied but made read-only here: the caller must not keep writing to them (or to the
+        arrays they are views of). A mapping already read-only (``MappingProxyType``) is shared as it is.
+        """
+        d = object.__new__(Detection)
+        for a in (position_m, covariance_m2, box_px):
+            if a is not None:
+                a.setflags(write=False)
+        if features is None:
+            features = _EMPTY
+        elif not isinstance(features, MappingProxyType):
+            for v in features.values():
+                v.setflags(write=False)
+            features = MappingProxyType(features)
+        if class_probs is None:
+            class_probs = _EMPTY
+        elif not isinstance(class_probs, MappingProxyType):
+            class_probs = MappingProxyType(class_probs)
+        _set(d, "t_ns", t_ns)
+        _set(d, "sensor", sensor)
+        _set(d, "position_m", position_m)
+        _set(d, "covariance_m2", covariance_m2)
+        _set(d, "box_px", box_px)
+        _set(d, "score", float(score))
+        _set(d, "cls", str(cls))
+        _set(d, "class_probs", class_probs)
+        _set(d, "features", features)
+        return d
+
+    def moved(self, position_m: np.ndarray) -> Detection:
+        """This detection with another ``position_m`` (a float64 ``(2,)`` array the caller hands over, made
+        read-only), everything else shared; no checks (see :meth:`trusted`)."""
+        d = object.__new__(Detection)
+        for name in Detection.__slots__:
+            _set(d, name, getattr(self, name))
+        position_m.setflags(write=False)
+        _set(d, "position_m", position_m)
+        return d
+
 
 @dataclass(frozen=True, slots=True, eq=False)
 class TrackState:
@@ -496,6 +548,30 @@ class TrackState:
         _set(self, "sensors", tuple(str(s) for s in self.sensors))
         _set(self, "score", float(self.score))
         _set(self, "box_px", _optional_array(self.box_px, np.float64, (4,), "TrackState.box_px"))
+
+    @staticmethod
+    def trusted(t_ns: int, sensor: str, track_id: int, position_m: np.ndarray, velocity_mps: np.ndarray,
+                covariance: np.ndarray | None = None, cls: str = ObjectClass.PERSON,
+                situation: str = Situation.NONCORRELATED, sensors: tuple[str, ...] = (), score: float = 1.0,
+                box_px: np.ndarray | None = None, camera: str = "") -> TrackState:
+        """A state from values a tracker already holds in the documented form, without checks or copies (its hot
+        path; ``TrackState(...)`` is the checked constructor).
+
+        The caller guarantees: ``t_ns`` and ``track_id`` ints; float64 arrays of shapes ``(2,)``, ``(2,)``,
+        ``(4, 4)`` (or ``None``) and ``(4,)`` (or ``None``); ``cls``/``situation`` :class:`ObjectClass` /
+        :class:`Situation` values; ``sensors`` a tuple of str. The arrays are made read-only, not copied: the
+        caller must not keep writing to them (or to the arrays they are views of).
+        """
+        st = object.__new__(TrackState)
+        for a in (position_m, velocity_mps, covariance, box_px):
+            if a is not None:
+                a.setflags(write=False)
+        for name, value in (("t_ns", t_ns), ("sensor", sensor), ("track_id", track_id), ("position_m", position_m),
+                            ("velocity_mps", velocity_mps), ("covariance", covariance), ("cls", str(cls)),
+                            ("situation", str(situation)), ("sensors", sensors), ("score", float(score)),
+                            ("box_px", box_px), ("camera", camera)):
+            _set(st, name, value)
+        return st
 
 
 @dataclass(frozen=True, slots=True, eq=False)

@@ -84,37 +84,47 @@ def _length(det: Detection) -> float:
     return float(g.ravel()[0]) if g is not None and g.size else math.nan
 
 
-class _Cluster:
-    __slots__ = ("_fused", "members")
+_EPS = np.eye(2) * 1e-6
 
-    def __init__(self, det: Detection) -> None:
-        self.members = [det]
-        self._fused: tuple[np.ndarray, np.ndarray] | None = None
 
-    def add(self, det: Detection) -> None:
-        self.members.append(det)
-        self._fused = None
+class _Clusters:
+    """The objects being built: members, and the running information sums of the information-weighted mean.
 
-    def position(self) -> tuple[np.ndarray, np.ndarray]:
-        """Information-weighted mean of the members' positions and its covariance (kept until a member joins)."""
-        if self._fused is None:
-            self._fused = self._position()
-        return self._fused
+    Each member's information ``(Σ_i + 10⁻⁶ I)⁻¹`` and information vector are computed once, in one batched call per
+    sensor; a cluster's sums grow in member order, so its position is the same as summing over its members."""
 
-    def _position(self) -> tuple[np.ndarray, np.ndarray]:
-        info = np.zeros((2, 2))
-        vec = np.zeros(2)
-        for d in self.members:
-            inv = np.linalg.inv(d.covariance_m2 + np.eye(2) * 1e-6)
-            info += inv
-            vec += inv @ d.position_m
-        cov = np.linalg.inv(info)
-        return cov @ vec, cov
+    __slots__ = ("info", "length", "members", "vec")
 
-    def length(self) -> float:
-        vals = [_length(d) for d in self.members if sensor_kind(d) == "laser"]
-        vals = [v for v in vals if np.isfinite(v)]
-        return max(vals) if vals else math.nan
+    def __init__(self) -> None:
+        self.members: list[list[Detection]] = []
+        self.info = np.zeros((0, 2, 2))
+        self.vec = np.zeros((0, 2))
+        self.length = np.zeros(0)
+
+    def __len__(self) -> int:
+        return len(self.members)
+
+    def positions(self) -> tuple[np.ndarray, np.ndarray]:
+        """Positions ``(m, 2)`` and covariances ``(m, 2, 2)`` of every cluster."""
+        cov = np.linalg.inv(self.info)
+        return np.matmul(cov, self.vec[:, :, None])[:, :, 0], cov
+
+    def add(self, rows: np.ndarray, dets: Sequence[Detection], which: np.ndarray, info: np.ndarray, vec: np.ndarray,
+            length: np.ndarray) -> None:
+        """Detections ``which`` join the clusters ``rows``."""
+        for a, b in zip(rows.tolist(), which.tolist(), strict=True):
+            self.members[a].append(dets[b])
+        self.info[rows] += info[which]
+        self.vec[rows] += vec[which]
+        self.length[rows] = np.fmax(self.length[rows], length[which])
+
+    def extend(self, dets: Sequence[Detection], which: np.ndarray, info: np.ndarray, vec: np.ndarray,
+               length: np.ndarray) -> None:
+        """Detections ``which`` start clusters of their own."""
+        self.members.extend([dets[b]] for b in which.tolist())
+        self.info = np.concatenate([self.info, info[which]])
+        self.vec = np.concatenate([self.vec, vec[which]])
+        self.length = np.concatenate([self.length, length[which]])
 
 
 def fuse_objects(per_sensor: dict[str, Sequence[Detection]], params: ObjectFusionParams | None = None
@@ -126,50 +136,61 @@ def fuse_objects(per_sensor: dict[str, Sequence[Detection]], params: ObjectFusio
     """
     p = params or ObjectFusionParams()
     order = sorted(per_sensor, key=lambda s: (0 if any(sensor_kind(d) == "laser" for d in per_sensor[s]) else 1, s))
-    clusters: list[_Cluster] = []
+    clusters = _Clusters()
     for s in order:
         dets = [d for d in per_sensor[s] if d.position_m is not None and np.isfinite(d.position_m).all()]
         if not dets:
             continue
-        if not clusters:
-            clusters = [_Cluster(d) for d in dets]
-            continue
-        cps = [c.position() for c in clusters]
-        cpos = np.array([c[0] for c in cps])
         dpos = np.array([d.position_m for d in dets])
+        dcov = np.array([d.covariance_m2 for d in dets])
+        dinfo = np.linalg.inv(dcov + _EPS)
+        dvec = np.matmul(dinfo, dpos[:, :, None])[:, :, 0]
+        dlen = np.array([_length(d) if sensor_kind(d) == "laser" else math.nan for d in dets])
+        if not len(clusters):
+            clusters.extend(dets, np.arange(len(dets)), dinfo, dvec, dlen)
+            continue
+        cpos, ccov = clusters.positions()
         diff = cpos[:, None] - dpos[None]
         cost = np.linalg.norm(diff, axis=2)
-        S = np.array([c[1] for c in cps])[:, None] + np.array([d.covariance_m2 for d in dets])[None]
+        S = ccov[:, None] + dcov[None]
         m2 = np.einsum("cdi,cdij,cdj->cd", diff, np.linalg.inv(S), diff)
         near = (cost <= p.gate_m) | (m2 <= p.gate_chi2)
-        clen = np.array([c.length() for c in clusters])
-        dlen = np.array([_length(d) for d in dets])
-        dl = np.abs(clen[:, None] - dlen[None])
+        dl = np.abs(clusters.length[:, None] - np.array([_length(d) for d in dets])[None])
         cost_gated = np.where(near, np.sqrt(m2) + p.size_penalty * np.nan_to_num(dl, nan=0.0), np.inf)
         pairs, _, free = hungarian(cost_gated, gate=np.inf)
-        for a, b in pairs:
-            clusters[a].add(dets[b])
-        clusters.extend(_Cluster(dets[b]) for b in free)
-    return [_object(c, p) for c in clusters]
+        if len(pairs):
+            clusters.add(pairs[:, 0], dets, pairs[:, 1], dinfo, dvec, dlen)
+        clusters.extend(dets, np.asarray(free, np.intp).reshape(-1), dinfo, dvec, dlen)
+    if not len(clusters):
+        return []
+    pos, cov = clusters.positions()
+    return [_object(m, pos[i], cov[i], p) for i, m in enumerate(clusters.members)]
 
 
-def _object(c: _Cluster, p: ObjectFusionParams) -> FusedObject:
-    pos, cov = c.position()
-    lasers = [d for d in c.members if sensor_kind(d) == "laser"]
-    cams = [d for d in c.members if sensor_kind(d) == "camera"]
+def _mean(arrays: list[np.ndarray]) -> np.ndarray:
+    """``np.mean(arrays, axis=0)``, without its overhead for one or two arrays (the common cases)."""
+    if len(arrays) == 1:
+        return arrays[0] / 1.0
+    if len(arrays) == 2:
+        return (arrays[0] + arrays[1]) / 2.0
+    return np.mean(arrays, axis=0)
+
+
+def _object(members: list[Detection], pos: np.ndarray, cov: np.ndarray, p: ObjectFusionParams) -> FusedObject:
+    lasers = [d for d in members if d.box_px is None]
+    cams = [d for d in members if d.box_px is not None]
     vel = None
     for group in (lasers, cams):
-        vs = [d.features["velocity_mps"] for d in group if "velocity_mps" in d.features]
-        vs = [v for v in vs if np.isfinite(v).all()]
+        vs = [v for v in (d.features.get("velocity_mps") for d in group) if v is not None and np.isfinite(v).all()]
         if vs:
-            vel = np.mean(vs, axis=0)
+            vel = _mean(vs)
             break
     hists = [d.features["hist_hsv"] for d in cams if "hist_hsv" in d.features]
     hist = None
     if hists:
-        h = np.mean(hists, axis=0)
+        h = _mean(hists)
         hist = h / max(float(h.sum()), 1e-12)
-    boxes = [d.features["box"] for d in lasers if "box" in d.features and np.isfinite(d.features["box"]).all()]
+    boxes = [b for b in (d.features.get("box") for d in lasers) if b is not None and np.isfinite(b).all()]
     box = max(boxes, key=lambda b: b[2]) if boxes else None
     if box is not None:
         length, width = float(box[2]), float(box[3])
@@ -181,12 +202,12 @@ def _object(c: _Cluster, p: ObjectFusionParams) -> FusedObject:
             cls = ObjectClass.UNKNOWN
         dims = np.array([length, width, float(box[4])])
     else:
-        votes = [d.cls for d in c.members if d.cls != ObjectClass.UNKNOWN]
+        votes = [d.cls for d in members if d.cls != ObjectClass.UNKNOWN]
         cls = max(set(votes), key=votes.count) if votes else ObjectClass.UNKNOWN
         dims = None
     conf = min(1.0, p.confidence_laser * len(lasers) + p.confidence_camera * len(cams))
     box_px = {d.sensor: d.box_px for d in cams}
-    return FusedObject(pos, cov, vel, hist, str(cls), conf, tuple(sorted(d.sensor for d in c.members)), dims,
+    return FusedObject(pos, cov, vel, hist, str(cls), conf, tuple(sorted(d.sensor for d in members)), dims,
                        box_px or None)
 
 
@@ -293,8 +314,7 @@ def _moved(d: Detection, dt: float) -> Detection:
     v = d.features.get("velocity_mps")
     if v is None or not np.isfinite(v).all():
         return d
-    return Detection(d.t_ns, d.sensor, d.position_m + v * dt, d.covariance_m2, d.box_px, d.score, d.cls,
-                     d.class_probs, d.features)
+    return d.moved(d.position_m + v * dt)
 
 
 def as_params(values: dict[str, Any], source: str = "traffic.fusion") -> ObjectFusionParams:

@@ -208,8 +208,8 @@ def _roi_polygon(roads: np.ndarray, margin_m: float) -> np.ndarray:
 
 
 def _as_detection(o: FusedObject, t_ns: int, sensor: str) -> Detection:
-    return Detection(t_ns, sensor, o.position_m, o.covariance_m2 + np.eye(2) * 1e-4, cls=o.cls,
-                     score=o.confidence)
+    return Detection.trusted(t_ns, sensor, np.array(o.position_m, np.float64), o.covariance_m2 + np.eye(2) * 1e-4,
+                             cls=o.cls, score=o.confidence)
 
 
 class _KalmanVariant:

@@ -1260,22 +1260,27 @@ class LaserVehicleDetector:
         groups = np.split(points[np.argsort(labels, kind="stable")], np.cumsum(n_points)[:-1])
         size_out = boxes.size_m + (self._dims[cls] - self._profile[cls])  # footprint: a bicycle is 0.6 m wide
         score = 1.0 - np.exp(-n_points / 8.0)
+        # fresh arrays the detections own (Detection.trusted takes them as they are, without copies)
+        centre = np.array(boxes.centre_m, np.float64)
+        cov = np.array(boxes.covariance_m2, np.float64)
+        box = np.column_stack([centre, size_out[:, 0], size_out[:, 1], heading]).astype(np.float64)
+        extent, from_prior = np.array(boxes.extent_m), np.array(boxes.from_prior)
+        vel = np.array(vel, np.float64)
+        track_ids = np.asarray(ids, np.int64).reshape(-1, 1).copy()
+        prob_rows = probs.tolist()
         out = []
         for j in range(n_points.size):
             feats: dict[str, np.ndarray] = {
-                "box": np.array([*boxes.centre_m[j], size_out[j, 0], size_out[j, 1], heading[j]]),
-                "track_id": np.array([ids[j]], np.int64),
+                "box": box[j],
+                "track_id": track_ids[j],
                 "points_m": groups[j],
-                "extent_m": boxes.extent_m[j],
-                "from_prior": boxes.from_prior[j],
+                "extent_m": extent[j],
+                "from_prior": from_prior[j],
             }
             if np.isfinite(vel[j, 0]):
                 feats["velocity_mps"] = vel[j]
-            out.append(Detection(scan.t_ns, scan.sensor, position_m=boxes.centre_m[j],
-                                 covariance_m2=boxes.covariance_m2[j], score=float(score[j]),
-                                 cls=_CLASSES[cls[j]],
-                                 class_probs={c: float(probs[j, i]) for i, c in enumerate(_CLASSES)},
-                                 features=feats))
+            out.append(Detection.trusted(scan.t_ns, scan.sensor, centre[j], cov[j], None, float(score[j]),
+                                         _CLASSES[cls[j]], dict(zip(_CLASSES, prob_rows[j], strict=True)), feats))
         return out
 
 

@@ -170,6 +170,7 @@ class VehicleModeTracker:
         self.dropped_steps = 0
         self._t: int | None = None
         self._next_id = itertools.count(1)
+        self._roi_path: Any = None
 
     # ------------------------------------------------------------------ helpers
     def centres(self) -> np.ndarray:
@@ -220,9 +221,11 @@ class VehicleModeTracker:
     def _inside_roi(self, xy: np.ndarray) -> np.ndarray:
         if self.roi is None or not xy.shape[0]:
             return np.ones(xy.shape[0], bool)
-        from matplotlib.path import Path as _MplPath
+        if self._roi_path is None:
+            from matplotlib.path import Path as _MplPath
 
-        return _MplPath(self.roi).contains_points(xy)
+            self._roi_path = _MplPath(self.roi)
+        return self._roi_path.contains_points(xy)
 
     # ------------------------------------------------------------------ step
     def step(self, t_ns: int, objects: Sequence[FusedObject]) -> list[TrackState]:
@@ -290,8 +293,17 @@ class VehicleModeTracker:
         if n < 2:
             return
         c = self.centres()[:, 0:2]
+        # a particle nearer its own centre than half the distance to every other centre keeps its mode: when all
+        # of a mode's particles are (the usual case, modes far apart) nothing moves and the pass is skipped
+        d_own = np.sqrt(((self.x[:, :, 0:2] - c[:, None]) ** 2).sum(axis=2).max(axis=1))
+        gap = np.linalg.norm(c[:, None] - c[None], axis=2)
+        np.fill_diagonal(gap, np.inf)
+        if np.all(d_own < 0.49 * gap.min(axis=1)):
+            return
         flat = self.x.reshape(-1, 4)
-        near = np.argmin(((flat[:, None, 0:2] - c[None]) ** 2).sum(axis=2), axis=1)
+        dx = flat[:, 0, None] - c[None, :, 0]
+        dy = flat[:, 1, None] - c[None, :, 1]
+        near = np.argmin(dx * dx + dy * dy, axis=1)
         own = np.repeat(np.arange(n), npart)
         if (near == own).all():
             return
@@ -342,7 +354,9 @@ class VehicleModeTracker:
 
     def _spawn(self, t_ns: int, objects: Sequence[FusedObject], taken: np.ndarray) -> None:
         p = self.p
-        free = np.setdiff1d(np.arange(len(objects)), taken) if len(objects) else np.zeros(0, np.intp)
+        unclaimed = np.ones(len(objects), bool)
+        unclaimed[np.asarray(taken, np.intp)] = False
+        free = np.flatnonzero(unclaimed)
         centres = self.centres()[:, 0:2]
         for j in free:
             o = objects[j]
@@ -378,9 +392,8 @@ class VehicleModeTracker:
         fresh = (t_ns - self.last_ok_ns) <= self.p.report_coast_s * 1e9
         for i in np.flatnonzero((self.n_matched >= self.p.n_confirm) & fresh):
             sensors = sensors_of.get(int(self.ids[i]), ())
-            out.append(TrackState(t_ns, self.sensor, int(self.ids[i]), mean[i, 0:2], mean[i, 2:4], cov[i],
-                                  cls=self.cls[i],
-                                  sensors=sensors, score=1.0 if sensors else 0.5))
+            out.append(TrackState.trusted(t_ns, self.sensor, int(self.ids[i]), mean[i, 0:2], mean[i, 2:4], cov[i],
+                                          cls=self.cls[i], sensors=tuple(sensors), score=1.0 if sensors else 0.5))
         return out
 
     def finish(self) -> list[Event]:

@@ -119,6 +119,8 @@ class AugmentedMaskParams:
 
 
 _ROW = np.dtype((np.void, 12))  # one float32 colour as a single element: row gathers ~3x faster than [idx]
+_PIXEL = np.dtype((np.void, 3))  # one uint8 BGR pixel as a single element
+_INV_COUNT = (1.0 / np.clip(np.arange(9), 1, 8)).astype(np.float32)  # a running mean's rate 1/min(count, 8)
 
 
 def _rows(colours: np.ndarray, idx: np.ndarray) -> np.ndarray:
@@ -163,6 +165,7 @@ class AugmentedMask:
         self._age = np.zeros(n, np.int32)
         self._stop = np.zeros(n, bool)
         self._ghost = np.zeros(n, bool)
+        self._busy = np.zeros(n, bool)  # stopped, ghost or counting: kept so no full-frame int compare is needed
         self._frame = 0
         self.suppressed_frames = 0  # frames in which triggers were suppressed (diagnostics)
 
@@ -205,6 +208,7 @@ class AugmentedMask:
             colours *= g
             np.minimum(colours, np.float32(255), out=colours)
         self._cnt[:] = 0
+        np.logical_or(self._stop, self._ghost, out=self._busy)
 
     # -- update -----------------------------------------------------------------------------------
 
@@ -234,30 +238,35 @@ class AugmentedMask:
         self._frame += 1
         thr2 = np.float32(p.match_threshold2)
         fg_all = mog_foreground.reshape(-1)
-        active = fg_all | self._stop | self._ghost | (self._cnt > 0)
+        active = fg_all | self._busy  # busy = stopped | ghost | counting
         idx = np.flatnonzero(active)
         if idx.size:
-            x = np.take(frame.reshape(-1, 3), idx, axis=0).astype(np.float32)
+            x = frame.reshape(-1, 3).view(_PIXEL).reshape(-1)[idx].view(np.uint8).reshape(-1, 3).astype(np.float32)
             fg = fg_all[idx]
             match_ref = _sqdist(x, _rows(self._ref.reshape(-1, 3), idx)) < thr2
+            cnt_all = self._cnt[idx]
 
             # steps 2-4: keep or release the stopped pixels (s = positions in idx of stopped pixels)
             st = self._stop[idx]
             s = np.flatnonzero(st)
-            gs = idx[s]
-            stop_col = _rows(self._stop_col, gs)
-            match_stop = _sqdist(x[s], stop_col) < thr2
-            miss_s = np.where(match_stop, 0, self._miss[gs] + 1)
-            age_s = self._age[gs] + 1
-            release_s = match_ref[s] | (miss_s >= p.n_release)
-            if p.t_max is not None:
-                release_s |= age_s >= p.t_max
-            # the stopped colour follows slow change (lighting); products with 0/1, not boolean indexing (faster)
-            follow = (match_stop & ~release_s).astype(np.float32) * np.float32(p.ref_rate)
-            stop_col += follow[:, None] * (x[s] - stop_col)
             release = np.zeros(idx.size, bool)
-            release[s] = release_s
-            still = st & ~release
+            if s.size:
+                gs = idx[s]
+                xs = x[s]
+                stop_col = _rows(self._stop_col, gs)
+                match_stop = _sqdist(xs, stop_col) < thr2
+                miss_s = np.where(match_stop, 0, self._miss[gs] + 1)
+                age_s = self._age[gs] + 1
+                release_s = match_ref[s] | (miss_s >= p.n_release)
+                if p.t_max is not None:
+                    release_s |= age_s >= p.t_max
+                # the stopped colour follows slow change (lighting); products with 0/1, not boolean indexing
+                follow = (match_stop & ~release_s).astype(np.float32) * np.float32(p.ref_rate)
+                stop_col += follow[:, None] * (xs - stop_col)
+                release[s] = release_s
+                still = st & ~release
+            else:
+                still = st
 
             # ghost: released onto the remembered background, while MoG has not relearned it
             ghost = (self._ghost[idx] | release) & match_ref & fg
@@ -265,16 +274,16 @@ class AugmentedMask:
             # step 1: count frames on one new colour (c = positions in idx of counting pixels), trigger at n_stop.
             # A count starts on MoG foreground only, but goes on if MoG absorbs the colour before n_stop (after an
             # illumination change MoG relearns at 10 α and absorbs whatever sits on a pixel for ~8 frames)
-            counting = ~still & ~match_ref & ~ghost & (fg | (self._cnt[idx] > 0))
+            counting = ~(still | match_ref | ghost) & (fg | (cnt_all > 0))
             c = np.flatnonzero(counting)
             gc = idx[c]
-            cnt_c = self._cnt[gc]
+            cnt_c = cnt_all[c]
             cand = _rows(self._cand, gc)
             xc = x[c]
             same = (cnt_c > 0) & (_sqdist(xc, cand) < thr2)
-            cnt_c = np.where(same, cnt_c + 1, np.where(fg[c], 1, 0))
+            cnt_c = np.where(same, cnt_c + 1, fg[c].view(np.int8)).astype(np.int32, copy=False)
             # a fresh candidate takes the colour (rate 1); a repeated one is a running mean, then smoothing
-            rate = np.where(same, 1.0 / np.clip(cnt_c, 1, 8), 1.0).astype(np.float32)
+            rate = np.where(same, _INV_COUNT[np.minimum(cnt_c, 8)], np.float32(1))
             cand += rate[:, None] * (xc - cand)
             trig = cnt_c >= p.n_stop
             n_trig = int(np.count_nonzero(trig))
@@ -287,25 +296,32 @@ class AugmentedMask:
                 self.suppressed_frames += 1
                 cnt_c[trig] = 0
                 trig[:] = False
-            gt = gc[trig]
+                n_trig = 0
             cnt_c[trig] = 0
 
             # write back: counters of every active pixel restart unless counting or stopped
-            self._cnt[idx] = 0
-            self._cnt[gc] = cnt_c
+            cnt_new = np.zeros(idx.size, np.int32)
+            cnt_new[c] = cnt_c
+            self._cnt[idx] = cnt_new
             _put_rows(self._cand, gc, cand)
             self._ghost[idx] = ghost
-            self._stop[gs] = ~release_s
-            self._miss[gs] = np.where(release_s, 0, miss_s)
-            self._age[gs] = np.where(release_s, 0, age_s)
-            _put_rows(self._stop_col, gs, stop_col)
-            self._stop[gt] = True
-            self._miss[gt] = 0
-            self._age[gt] = 0
-            _put_rows(self._stop_col, gt, _rows(self._cand, gt))
+            stop_new = still.copy()
+            if s.size:
+                self._miss[gs] = np.where(release_s, 0, miss_s)
+                self._age[gs] = np.where(release_s, 0, age_s)
+                _put_rows(self._stop_col, gs, stop_col)
+            if n_trig:
+                gt = gc[trig]
+                stop_new[c[trig]] = True
+                self._miss[gt] = 0
+                self._age[gt] = 0
+                _put_rows(self._stop_col, gt, cand[trig])
+            self._stop[idx] = stop_new
+            self._busy[idx] = stop_new | ghost | (cnt_new > 0)
 
         # step 5: the remembered background follows the frame where MoG sees background and nothing stopped
-        bg = (~fg_all & ~self._stop & (self._cnt == 0)).reshape(self.shape)
+        # (ghost pixels are MoG foreground, so this is: neither MoG foreground nor busy)
+        bg = ~(fg_all | self._busy).reshape(self.shape)
         bg_u8 = bg.view(np.uint8)
         if p.ref_check_every and self._frame % p.ref_check_every == 0:
             # L1 colour distance; for an equal offset in all three channels L1 > sqrt(3 thr2) <=> L2² > thr2

@@ -1275,21 +1275,29 @@ class CameraVehicleDetector:
         flip = ~moving & (np.einsum("ij,ij->i", v, axis) < 0)
         heading[flip] = np.arctan2(-axis[flip, 1], -axis[flip, 0])
 
+        # the detections own fresh float64 arrays (Detection.trusted takes them as they are, without copies)
+        box_f = np.column_stack([centre, length_app, width_app, heading]).astype(np.float64)
+        centre, cov, edges = (np.array(a, np.float64) for a in (centre, cov, edges))
+        hists, g = np.array(hists, np.float64), np.array(g, np.float64)
+        vel = np.array(assigned.velocities, np.float64)
+        has_vel = np.all(np.isfinite(vel), axis=1)
+        ids, queue = assigned.track_ids.astype(np.int64).reshape(-1, 1), parts.queue.astype(np.int64).reshape(-1, 1)
+        trunc = truncated.reshape(-1, 1).copy()
         out = []
         for i in range(n):
             feats: dict[str, np.ndarray] = {
-                "box": np.array([centre[i, 0], centre[i, 1], length_app[i], width_app[i], heading[i]]),
+                "box": box_f[i],
                 "hist_hsv": hists[i],
-                "track_id": np.array([assigned.track_ids[i]], np.int64),
+                "track_id": ids[i],
                 "ground_point_m": g[i],
-                "truncated": np.array([bool(truncated[i])]),
-                "queue": np.array([int(parts.queue[i])], np.int64),
+                "truncated": trunc[i],
+                "queue": queue[i],
             }
-            if np.all(np.isfinite(assigned.velocities[i])):
-                feats["velocity_mps"] = assigned.velocities[i]
-            out.append(Detection(t_ns, self.camera_name, position_m=centre[i], covariance_m2=cov[i],
-                                 box_px=edges[i], score=1.0 if assigned.confirmed[i] else 0.5,
-                                 cls="bicycle" if bicycle[i] else "car", features=feats))
+            if has_vel[i]:
+                feats["velocity_mps"] = vel[i]
+            out.append(Detection.trusted(t_ns, self.camera_name, centre[i], cov[i], edges[i],
+                                         1.0 if assigned.confirmed[i] else 0.5, "bicycle" if bicycle[i] else "car",
+                                         features=feats))
         return out
 
     def _parts(self, blobs: Blobs, k: np.ndarray) -> _Parts:
