@@ -14,6 +14,7 @@ import pytest
 from fusiontrack.calibration.road import (
     CameraCalibration,
     ControlPoints,
+    LaserCalibration,
     RoadCalibration,
     calibrate_road,
     format_residual_table,
@@ -390,15 +391,11 @@ def test_recording_calibration_uses_the_believed_pose_and_removes_distortion(bia
         road_calibration_from_recording(path, lasers=["laser_7"])
 
 
-def test_calibrate_road_command_recovers_the_road_recordings_true_poses(road_recording, tmp_path):
-    # A site survey of the simulated road: markers on the road seen by each camera (their pixels from the TRUE
-    # pose and lens, 1 px noise) and reflectors seen by each laser (in its true frame, 2 cm noise). The
-    # calibration written by the command must put the cameras' and lasers' views of the road where the truth is.
-    from typer.testing import CliRunner
-
-    from fusiontrack.cli import app
-
-    rng = np.random.default_rng(3)
+def _survey(road_recording: Path, path: Path, rng: np.random.Generator, shift_m: float = 0.0
+            ) -> tuple[Path, dict[str, PinholeCamera], dict[str, np.ndarray]]:
+    """A site survey of the simulated road: markers on the road seen by each camera (pixels from the TRUE pose and
+    lens, 1 px noise) and reflectors seen by each laser (in its true frame, 2 cm noise); road coordinates written
+    ``shift_m`` further along x than they are (a survey in another frame)."""
     rows = []
     with Recording(road_recording) as rec:
         tree = _tree(rec)
@@ -413,13 +410,25 @@ def test_calibrate_road_command_recovers_the_road_recordings_true_poses(road_rec
         uv = cam.project(floor(grid))
         inside = np.all(np.isfinite(uv), axis=1) & np.all((uv > 5) & (uv < (cam.width - 5, cam.height - 5)), axis=1)
         uv = uv[inside] + rng.normal(0, 1.0, (int(inside.sum()), 2))
-        rows += [f"{name},camera,{u:.3f},{v:.3f},{x},{y}" for (u, v), (x, y) in zip(uv, grid[inside], strict=True)]
+        rows += [f"{name},camera,{u:.3f},{v:.3f},{x + shift_m},{y}"
+                 for (u, v), (x, y) in zip(uv, grid[inside], strict=True)]
     for name, T in lasers.items():
         R, t = T[:2, :2], T[:2, 3]
         xy = np.array([[-8.0, -6.5], [8.0, -6.5], [0.0, 6.5], [-4.0, 12.0], [4.0, 12.0]]) + t * [1, 0]
         local = (xy - t) @ R + rng.normal(0, 0.02, xy.shape)
-        rows += [f"{name},laser,{a:.4f},{b:.4f},{x},{y}" for (a, b), (x, y) in zip(local, xy, strict=True)]
-    points = write_csv(tmp_path / "survey.csv", rows)
+        rows += [f"{name},laser,{a:.4f},{b:.4f},{x + shift_m},{y}" for (a, b), (x, y) in zip(local, xy, strict=True)]
+    return write_csv(path, rows), cams, lasers
+
+
+def test_calibrate_road_command_recovers_the_road_recordings_true_poses(road_recording, tmp_path):
+    # The calibration written by the command must put the cameras' and lasers' views of the road where the truth is.
+    from typer.testing import CliRunner
+
+    from fusiontrack.cli import app
+
+    points, cams, lasers = _survey(road_recording, tmp_path / "survey.csv", np.random.default_rng(3))
+    gx, gy = np.meshgrid(np.arange(-40.0, 41.0, 5.0), [-5.0, -1.75, 1.75, 5.0])
+    grid = np.column_stack([gx.ravel(), gy.ravel()])
     out = tmp_path / "road_calibration.json"
     result = CliRunner().invoke(app, ["calibrate-road", str(points), "-o", str(out), "--lenses",
                                       str(road_recording)])
@@ -442,6 +451,47 @@ def test_calibrate_road_command_recovers_the_road_recordings_true_poses(road_rec
         fitted = calib.laser(name)
         np.testing.assert_allclose(fitted.t, T[:2, 3], atol=0.05)
         assert abs(math.degrees(fitted.yaw_rad - math.atan2(T[1, 0], T[0, 0]))) < 0.5
+
+
+def test_the_traffic_pipeline_poses_its_sensors_by_the_road_calibration(road_recording, tmp_path):
+    # Tracked through a surveyed calibration the vehicles are where the simulator put them, as through the
+    # recording's own tf; a survey written 4 m off along the road moves every track 4 m (so every sensor is
+    # posed by the calibration), and the tracks are then 4 m from the truth.
+    from fusiontrack.eval.vehicles import evaluate_vehicles
+    from fusiontrack.fusion.traffic import track_traffic
+    from fusiontrack.types import GroundTruth
+
+    with Recording(road_recording) as rec:
+        gt = [g for g in rec.messages(["/ground_truth"]) if isinstance(g, GroundTruth)]
+    area = [(-45, -9), (45, -9), (45, 9), (-45, 9)]
+    rng = np.random.default_rng(5)
+    runs = {}
+    for label, shift in (("tf", None), ("survey", 0.0), ("shifted", 4.0)):
+        calib = None if shift is None else calibrate_road(_survey(road_recording, tmp_path / f"{label}.csv", rng,
+                                                                  shift)[0])
+        res = track_traffic(road_recording, variants=("fusion_pf",), calibration=calib)
+        runs[label] = res.states["fusion_pf"]
+    scores = {k: evaluate_vehicles(gt, v, area=area, rate_hz=15) for k, v in runs.items()}
+    assert scores["tf"].mota > 0.5
+    assert scores["survey"].mota > scores["tf"].mota - 0.1
+    assert scores["shifted"].mota < 0.2
+    moved = {}
+    for s in runs["shifted"]:
+        near = [o for o in runs["survey"] if o.t_ns == s.t_ns]
+        if near:
+            d = np.array([o.position_m for o in near]) - s.position_m
+            moved[s.t_ns, s.track_id] = d[np.argmin(np.linalg.norm(d - [-4.0, 0.0], axis=1))]
+    shift = np.median(np.array(list(moved.values())), axis=0)
+    np.testing.assert_allclose(shift, [-4.0, 0.0], atol=0.3)
+
+
+def test_a_calibration_naming_a_sensor_the_recording_lacks_is_a_clear_error(road_recording):
+    from fusiontrack.fusion.traffic import track_traffic
+
+    calib = RoadCalibration(lasers={"laser_7": LaserCalibration("laser_7", np.eye(2), np.zeros(2))},
+                            source="site.json")
+    with pytest.raises(ConfigError, match=r"site\.json.*laser_7.*laser_0"):
+        track_traffic(road_recording, variants=("fusion_pf",), calibration=calib)
 
 
 def test_calibrate_road_command_names_a_bad_file(tmp_path):

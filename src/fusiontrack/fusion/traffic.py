@@ -246,7 +246,7 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
                   params: TrafficParams | None = None, variants: Iterable[str] = ("fusion_pf",),
                   time_source: str = "header", message_filter: Callable[[Any], Any] | None = None,
                   progress: Callable[[float], None] | None = None, start_ns: int | None = None,
-                  stop_ns: int | None = None) -> TrafficResult:
+                  stop_ns: int | None = None, calibration: Any = None) -> TrafficResult:
     """Run the traffic pipeline over a recording (module docstring).
 
     Parameters
@@ -263,13 +263,20 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
     variants : names of :data:`VARIANTS`
     message_filter : callable(message) -> message or None, optional
         Applied to every sensor message before its branch (``None`` drops it): fault injection.
+    calibration : RoadCalibration or path of its JSON, optional
+        Poses the lasers and cameras it names (``fusiontrack calibrate-road``, D1) instead of the recording's
+        ``/tf_static`` and ``CameraInfo`` (:func:`~fusiontrack.fusion.traffic_sensors.traffic_branches`).
     """
-    from ..laser.vehicles import vehicle_detector_for_recording
     from ..scene import SceneUnderstanding, default_rules, load_road_geometry, load_rules, road_geometry_from_world
     from ..scene.road import RoadGeometry
-    from ..vision.vehicles import VehicleDetectorParams, vehicle_detectors_for_recording
+    from ..vision.vehicles import VehicleDetectorParams
+    from .traffic_sensors import traffic_branches
 
     p = params or TrafficParams()
+    if isinstance(calibration, str | Path):
+        from ..calibration.road import RoadCalibration
+
+        calibration = RoadCalibration.load(calibration)
     variants = tuple(variants)
     bad = [v for v in variants if v not in VARIANTS]
     if bad or not variants:
@@ -316,19 +323,9 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
     errors: dict[str, int] = {}
     buffer = DetectionBuffer(max(p.fusion.max_age_s, frame_s))
     with Recording(path) as rec, _opencv_threads(1):
-        try:
-            laser, laser_topics = vehicle_detector_for_recording(rec, roads, time_source=time_source, **p.laser)
-        except ConfigError as err:
-            if "no LaserScan topic" not in str(err):
-                raise
-            laser, laser_topics = None, []
         cam_params = VehicleDetectorParams(**dict(p.camera)) if p.camera else None
-        try:
-            cams = vehicle_detectors_for_recording(rec, roads, params=cam_params)
-        except RecordingError as err:
-            if "no camera with a CameraInfo" not in str(err):
-                raise
-            cams = {}
+        laser, laser_topics, cams = traffic_branches(rec, roads, laser_params=p.laser, camera_params=cam_params,
+                                                     time_source=time_source, calibration=calibration)
         if laser is None and not cams:
             raise RecordingError(f"{path}: neither LaserScan nor camera topics: nothing to track")
         cam_by_sensor = {d.camera_name: d for _, d in cams.values()}

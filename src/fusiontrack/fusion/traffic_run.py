@@ -90,8 +90,7 @@ def run_traffic(recording: str | Path, output: str | Path, *, geometry: Any = No
     if variants is None:
         variants = tuple(VARIANTS) if compare else ("fusion_pf",)
     result = track_traffic(recording, geometry=geometry, rules=rules, params=p, variants=variants,
-                           time_source=time_source, progress=progress,
-                           **({} if calibration is None else {"calibration": calibration}))
+                           time_source=time_source, progress=progress, calibration=calibration)
     output.mkdir(parents=True, exist_ok=True)
     states = result.states["fusion_pf"] if "fusion_pf" in result.states else next(iter(result.states.values()))
     write_tracks_csv(output / "tracks.csv", states)
