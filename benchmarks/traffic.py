@@ -11,6 +11,15 @@ the monitored stretch (``AREA``).
 
     .venv/bin/python benchmarks/traffic.py [--seeds 0 1 2] [--seconds 60] [--keep DIR] [--camera-every K]
         [--laser-every K] [--processing-scale S]
+    .venv/bin/python benchmarks/traffic.py --seeds 0 1 2 --incidents-from DIR
+
+Incidents: the pipeline runs the D8 rules online on the fusion + PF tracks; the learned behaviour model
+(``scene/learned.py``, the shipped forest) is then run over the same fusion + PF states through the same interface
+as ``fusiontrack events --learned``. Both are scored against the simulator's labelled incidents
+(``eval/events.py``): onset latency = event start - incident start, alarm latency = the event's ``alarm_t_ns`` -
+incident start. With ``--keep DIR`` the fusion + PF states are kept as ``DIR/tracks_<seed>.jsonl`` (and the
+online rule events as ``events_<seed>.jsonl``); ``--incidents-from DIR`` re-scores such a folder (both engines on
+the kept tracks, truth from ``DIR/road_<seed>/ground_truth``) without simulating or tracking again.
 
 Speed is given by the wall clock and by the process's CPU time: on a shared machine only the latter is stable.
 
@@ -37,11 +46,13 @@ from fusiontrack.eval.vehicles import evaluate_vehicles, identity_kept
 from fusiontrack.fusion.traffic import VARIANTS, TrafficParams, track_traffic
 from fusiontrack.geometry import scan_to_points, transform_points
 from fusiontrack.io.recording import Recording
+from fusiontrack.io.tracks import read_jsonl, write_jsonl
 from fusiontrack.laser.vehicles import laser_poses_for_recording
+from fusiontrack.scene import detect_events, detect_events_learned, road_geometry_from_world
 from fusiontrack.sim.model import rect_corners
 from fusiontrack.sim.scenario import load_scenario
 from fusiontrack.sim.simulator import simulate
-from fusiontrack.types import GroundTruth, Image, LaserScan
+from fusiontrack.types import Event, GroundTruth, Image, LaserScan
 
 console = Console(width=170)
 DURATIONS_S = (1.0, 1.5, 1.9, 1.2, 1.7)
@@ -156,7 +167,8 @@ class Occluder:
         return msg
 
 
-def run_seed(seed: int, seconds: float, folder: Path, params: TrafficParams | None = None) -> dict[str, Any]:
+def run_seed(seed: int, seconds: float, folder: Path, params: TrafficParams | None = None,
+             keep_tracks: bool = False) -> dict[str, Any]:
     scen = load_scenario("road").with_overrides(seconds=seconds, seed=seed, settings={
         "cameras.0.illumination": [[seconds / 3, 0.55]]})
     rec_dir = folder / f"road_{seed}"
@@ -185,7 +197,16 @@ def run_seed(seed: int, seconds: float, folder: Path, params: TrafficParams | No
             xb, xa = gb.positions_m[gb.ids == o["id"]], ga.positions_m[ga.ids == o["id"]]
             kept.append(identity_kept(states, xb[0], gb.t_ns, xa[0], ga.t_ns) if len(xb) and len(xa) else None)
         out["kept"][v] = kept
-    out["incidents"] = score_events(read_incidents(rec_dir), res.scene_events, read_agents_csv(rec_dir))
+    agents = read_agents_csv(rec_dir)
+    out["incidents"] = score_events(read_incidents(rec_dir), res.scene_events, agents)
+    tic = time.process_time()
+    learned = detect_events_learned(res.states["fusion_pf"], road_geometry_from_world(
+        rec_dir / "ground_truth" / "world.json"))
+    out["learned_cpu"] = time.process_time() - tic
+    out["incidents_learned"] = score_events(read_incidents(rec_dir), learned, agents)
+    if keep_tracks:
+        write_jsonl(folder / f"tracks_{seed}.jsonl", res.states["fusion_pf"])
+        write_jsonl(folder / f"events_{seed}.jsonl", res.scene_events)
     out["speed"] = res.speed_x_real_time()
     out["speed_cpu"] = res.speed_x_real_time(cpu=True)
     out["timings"] = res.timings_s
@@ -193,6 +214,40 @@ def run_seed(seed: int, seconds: float, folder: Path, params: TrafficParams | No
     out["duration"] = res.duration_s
     out["wall_x"] = res.duration_s / wall
     return out
+
+
+def incidents_from(folder: Path, seed: int) -> dict[str, Any]:
+    """Both engines on the kept fusion + PF states of one seed (``--incidents-from``)."""
+    gt = folder / f"road_{seed}" / "ground_truth"
+    states = [s for s in read_jsonl(folder / f"tracks_{seed}.jsonl") if not isinstance(s, Event)]
+    geo = road_geometry_from_world(gt / "world.json")
+    incidents, agents = read_incidents(gt / "incidents.jsonl"), read_agents_csv(gt / "agents.csv")
+    tic = time.process_time()
+    learned = detect_events_learned(states, geo)
+    cpu = time.process_time() - tic
+    return {"seed": seed, "incidents": score_events(incidents, detect_events(states, geo), agents),
+            "incidents_learned": score_events(incidents, learned, agents), "learned_cpu": cpu,
+            "duration": (max(s.t_ns for s in states) - min(s.t_ns for s in states)) * 1e-9}
+
+
+def incident_table(runs: list[dict[str, Any]], title: str) -> Table:
+    """Per engine (D8 rules, learned model) and kind, pooled over the runs."""
+    t2 = Table(title=title)
+    for c in ("engine", "kind", "true", "detections", "hits", "false alarms", "precision", "recall",
+              "onset latency s (median)", "alarm latency s (median)", "alarm latency s (max)"):
+        t2.add_column(c, justify="left" if c in ("engine", "kind") else "right")
+    for engine, key in (("D8 rules", "incidents"), ("learned", "incidents_learned")):
+        for k in runs[0][key]:
+            sc = [r[key][k] for r in runs]
+            true, det = sum(s.true for s in sc), sum(s.detections for s in sc)
+            hit = sum(s.true_positives for s in sc)
+            on = [x for s in sc for x in s.onset_latency_s]
+            al = [x for s in sc for x in s.alarm_latency_s]
+            t2.add_row(engine, k, str(true), str(det), str(hit), str(det - hit), f"{hit / det:.2f}" if det else "–",
+                       f"{hit / true:.2f}" if true else "–", f"{np.median(on):.2f}" if on else "–",
+                       f"{np.median(al):.2f}" if al else "–", f"{np.max(al):.2f}" if al else "–")
+        t2.add_section()
+    return t2
 
 
 def main() -> None:
@@ -204,7 +259,17 @@ def main() -> None:
     ap.add_argument("--laser-every", type=int, default=None, help="TrafficParams.laser_every (default: its own)")
     ap.add_argument("--processing-scale", type=int, default=None,
                     help="the cameras' VehicleDetectorParams.processing_scale (default: its own)")
+    ap.add_argument("--incidents-from", type=Path, default=None,
+                    help="only re-score the incidents of a --keep folder's tracks (rules and learned model)")
     args = ap.parse_args()
+    if args.incidents_from is not None:
+        kept = [incidents_from(args.incidents_from, s) for s in args.seeds]
+        console.print(incident_table(kept, f"incidents on the kept fusion + PF tracks of {args.incidents_from} "
+                                           f"(seeds {' '.join(map(str, args.seeds))}), against the simulator's "
+                                           "labels, pooled"))
+        console.print("learned model CPU time per recording second: " + ", ".join(
+            f"seed {r['seed']} {1e3 * r['learned_cpu'] / r['duration']:.0f} ms" for r in kept))
+        return
     params = TrafficParams()
     if args.camera_every is not None:
         params = replace(params, camera_every=args.camera_every)
@@ -221,7 +286,7 @@ def main() -> None:
     runs = []
     for s in args.seeds:
         console.print(f"seed {s}: simulating {args.seconds:g} s of road and tracking ...")
-        runs.append(run_seed(s, args.seconds, folder, params))
+        runs.append(run_seed(s, args.seconds, folder, params, keep_tracks=args.keep is not None))
         if args.keep is None:
             shutil.rmtree(folder / f"road_{s}", ignore_errors=True)
     t = Table(title=f"road, {len(runs)} seeds x {args.seconds:g} s: vehicles within 2 m; injected occlusions kept")
@@ -235,20 +300,10 @@ def main() -> None:
                   *(str(sum(getattr(m, a) for m in ms)) for a in ("id_switches", "fp", "fn")),
                   f"{sum(kept)}/{len(kept)} (of {n_occ})")
     console.print(t)
-    t2 = Table(title="incidents (fusion + PF tracks, D8 rules) against the simulator's labels, pooled")
-    for c in ("kind", "true", "detections", "hits", "false alarms", "precision", "recall", "onset latency s",
-              "alarm latency s"):
-        t2.add_column(c, justify="left" if c == "kind" else "right")
-    kinds = runs[0]["incidents"].keys()
-    for k in kinds:
-        sc = [r["incidents"][k] for r in runs]
-        true, det, hit = sum(s.true for s in sc), sum(s.detections for s in sc), sum(s.true_positives for s in sc)
-        on = [x for s in sc for x in s.onset_latency_s]
-        al = [x for s in sc for x in s.alarm_latency_s]
-        t2.add_row(k, str(true), str(det), str(hit), str(det - hit), f"{hit / det:.2f}" if det else "–",
-                   f"{hit / true:.2f}" if true else "–", f"{np.median(on):.2f}" if on else "–",
-                   f"{np.median(al):.2f}" if al else "–")
-    console.print(t2)
+    console.print(incident_table(runs, "incidents on the fusion + PF tracks (D8 rules online; learned model on the "
+                                       "same states) against the simulator's labels, pooled"))
+    console.print("learned model CPU time per recording second: " + ", ".join(
+        f"seed {r['seed']} {1e3 * r['learned_cpu'] / r['duration']:.0f} ms" for r in runs))
     t3 = Table(title="speed (2 cameras 640x480 @ 15 Hz, 2 lasers 361 beams @ 25 Hz), per recording second: "
                      "wall clock / CPU time")
     parts = list(runs[0]["timings"])

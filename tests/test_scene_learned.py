@@ -121,7 +121,9 @@ def test_learned_model_on_synthetic_tracks() -> None:
     tracks = [
         _track(1, t, x_stop, -1.75 * one, v_stop, zero),  # stops at t = 20 s
         _track(2, t, 200.0 - 14.0 * t, -1.75 * one, -14.0 * one, zero),  # wrong way in the east lane
-        _track(3, t, -280.0 + 13.9 * t, -1.75 * one + 0 * t, 13.9 * one, zero),  # free flow, both directions
+        # free flow, both directions; the east-bound car runs ahead of the one that stops (starting behind it in
+        # the same single lane it would drive through the stopped car at 13.9 m/s at t = 20.5 s)
+        _track(3, t, -150.0 + 13.9 * t, -1.75 * one + 0 * t, 13.9 * one, zero),
         _track(4, t, 280.0 - 13.9 * t, 1.75 * one, -13.9 * one, zero),
     ]
     scene = LearnedSceneUnderstanding(road)

@@ -7,11 +7,15 @@ ALGORITHMS.md D7 / D8 (seed 003):
   a vehicle class) and its properties, computed from a short history: speed, velocity and heading as medians
   over 0.5 s, acceleration, lateral speed towards the road edge, signed distance to the road edge (now and
   predicted 1 s ahead), lane, cosine between the motion and the lane direction, zones, dwell time, time on the
-  road. Per lane zone, the group properties: count, mean speed and density of the vehicles in a sliding window.
+  road, and whether a sensor confirmed the state (``measured``: false while the tracker coasts). Per lane zone,
+  the group properties: count, mean speed and density of the vehicles in a sliding window.
 * **Rules** (:class:`SceneRules`, a TOML file, ``scene/data/default_rules.toml`` by default): per application a
   logical expression over the selected properties (spatial and logical constraints), a hold time or frame
   count (temporal constraint) and a clearing condition (hysteresis). Defaults are D8's: stopped vehicle, road
-  leaving with its early warning (kind ``road_leaving_warning``), jam, and wrong-way driving.
+  leaving with its early warning (kind ``road_leaving_warning``), jam, and wrong-way driving. Road leaving and its
+  warning count only measured states: a coasting track's position is the tracker's extrapolation, and on the
+  traffic pipeline's tracks every road-leaving false alarm came from a mode coasting off the road after a
+  camera-only object placed beyond the edge or a wrong association.
 * **Events**: :class:`SceneUnderstanding` is online (``update(t_ns, track_states) -> list[Event]``: start
   events with ``t_end_ns = None`` and end events); :func:`detect_events` runs it over whole tracks.
 
@@ -74,6 +78,8 @@ VEHICLE_PROPERTIES: Mapping[str, str] = {
     "dwell": "s since the track last entered or left a zone",
     "track_age": "s since the track's first state",
     "score": "the track's score",
+    "measured": "bool, a sensor confirmed this state (TrackState.sensors not empty; a track that never names its "
+                "sensors counts as measured): false while the tracker coasts on its prediction",
     "length": "m, the entity's length when given (NaN otherwise)",
     "is_vehicle": "bool, entity type vehicle",
     "is_group": "bool, entity type group of vehicles",
@@ -452,6 +458,7 @@ class SwitchingControl:
         self.latest_zones = grow(g("latest_zones"), False, (z,))
         self.latest_lane = grow(g("latest_lane"), np.int64(-1))
         self.latest_s = grow(g("latest_s"), np.nan)
+        self.names_sensors = grow(g("names_sensors"), False)
         self._n_slots = n
 
     def _grow_history(self) -> None:
@@ -496,6 +503,7 @@ class SwitchingControl:
         self.latest_pos[s], self.latest_speed[s], self.latest_score[s] = np.nan, np.nan, np.nan
         self.latest_vehicle[s], self.latest_zones[s] = False, False
         self.latest_lane[s], self.latest_s[s] = -1, np.nan
+        self.names_sensors[s] = False
 
     def expire(self, t_ns: int) -> list[tuple[int, int, int]]:
         """Free the tracks unseen for longer than ``track_timeout_s``: ``[(slot, track_id, last_t_ns)]``."""
@@ -542,7 +550,10 @@ class SwitchingControl:
         pos = np.array([s.position_m for s in sts], dtype=np.float64).reshape(n, 2)
         vel_given = np.array([s.velocity_mps for s in sts], dtype=np.float64).reshape(n, 2)
         score = np.array([s.score for s in sts], dtype=np.float64)
+        sensed = np.fromiter((bool(s.sensors) for s in sts), bool, n)
         slots = self._slots_for(ids, t_ns)
+        self.names_sensors[slots] |= sensed
+        measured = sensed | ~self.names_sensors[slots]
         sm = self.rules.smoothing
         # raw velocity: the track's own, else the position difference since its previous state
         dt_s = (t_ns - self.last_t_ns[slots]) * 1e-9
@@ -601,7 +612,8 @@ class SwitchingControl:
             "lateral_speed": lateral, "edge_distance": edge, "predicted_edge_distance": pred, "on_road": on_road,
             "time_on_road": self.time_on_road_s[slots].copy(), "in_lane": lane >= 0, "lane_cos": lane_cos,
             "lane_offset": lane_off, "dwell": (t_ns - self.dwell_start_ns[slots]) * 1e-9,
-            "track_age": (t_ns - self.first_t_ns[slots]) * 1e-9, "score": score, "length": lengths,
+            "track_age": (t_ns - self.first_t_ns[slots]) * 1e-9, "score": score, "measured": measured,
+            "length": lengths,
             "is_vehicle": is_vehicle, "is_group": is_group,
         }
         self.latest_pos[slots], self.latest_speed[slots] = pos, speed
@@ -810,6 +822,17 @@ class EventLog:
                     tuple(sorted(self._ids[event])), attrs)
         self._events[event] = out
         return out
+
+    def reopen(self, event: int) -> Event:
+        """An ended event goes on again (``t_end_ns = None``, its ``cleared_t_ns`` dropped)."""
+        ev = self._events[event]
+        attrs = {k: v for k, v in ev.attributes.items() if k != "cleared_t_ns"}
+        out = Event(ev.t_ns, ev.sensor, ev.kind, None, ev.position_m, tuple(sorted(self._ids[event])), attrs)
+        self._events[event] = out
+        return out
+
+    def kind(self, event: int) -> str:
+        return self._events[event].kind
 
     def current(self, event: int) -> Event:
         ev = self._events[event]
