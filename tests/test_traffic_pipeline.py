@@ -175,6 +175,18 @@ def test_the_scripted_road_leaving_is_detected_near_its_onset(road, run):
     assert any(abs(e.t_ns - truth[0].t_ns) <= 2e9 for e in found)
 
 
+def test_the_learned_scene_model_online_alarms_within_two_seconds_of_the_road_leaving(road):
+    # D8's supervised alternative behind the same interface, online in the pipeline: the scripted road leaving is
+    # found, its alarm (not only its backdated onset) within 2 s of the simulator's label.
+    truth = [e for e in read_incidents(road[0]) if e.kind == "road_leaving"]
+    res = track_traffic(road[0], variants=("fusion_pf",), scene_engine="learned")
+    found = [e for e in res.scene_events if e.kind == "road_leaving"]
+    assert len(found) == 1
+    assert 0 <= found[0].attributes["alarm_t_ns"] - truth[0].t_ns <= 2e9
+    with pytest.raises(ConfigError, match="scene_engine"):
+        track_traffic(road[0], scene_engine="neural")
+
+
 def test_a_dead_camera_and_a_dead_laser_degrade_tracking_and_do_not_stop_it(road):
     path, gt = road
     with Recording(path) as rec:

@@ -370,6 +370,9 @@ def track(
                                                )] = None,
     compare: Annotated[bool, typer.Option(help="traffic: also run camera-only, laser-only and fusion without the "
                                           "particle filter, and score them all when there is ground truth.")] = False,
+    scene: Annotated[str, typer.Option(help="traffic: incidents by the D8 'rules' (alarms after their hold times: "
+                                       "10 s stopped, 30 s jam) or the 'learned' behaviour model (alarms within "
+                                       "about 2 s).")] = "rules",
     calibration: Annotated[Path | None, typer.Option(help="traffic: road calibration JSON from `fusiontrack "
                                                      "calibrate-road` (or [traffic] calibration = FILE in the "
                                                      "pipeline file); the sensors it names are posed by it instead "
@@ -389,7 +392,7 @@ def track(
     if time_source not in ("header", "log"):
         raise ConfigError(f"--time: expected 'header' or 'log', got {time_source!r}")
     traffic_only = {"--geometry": geometry is not None, "--rules": rules is not None, "--compare": compare,
-                    "--calibration": calibration is not None}
+                    "--calibration": calibration is not None, "--scene": scene != "rules"}
     if pipeline != "traffic" and any(traffic_only.values()):
         given = ", ".join(k for k, v in traffic_only.items() if v)
         raise ConfigError(f"{given}: only for --pipeline traffic (got --pipeline {pipeline})")
@@ -404,7 +407,7 @@ def track(
         return
     if pipeline == "traffic":
         _track_traffic(recordings, output, config=config, geometry=geometry, rules=rules, compare=compare,
-                       video=video, time_source=time_source, seed=seed, calibration=calibration)
+                       video=video, time_source=time_source, seed=seed, calibration=calibration, scene=scene)
         return
     seed = 0 if seed is None else seed
     if pipeline == "people-camera":
@@ -527,7 +530,7 @@ def _track_wearable(sources: list[Path], output: Path, *, config: Path | None, s
 
 def _track_traffic(sources: list[Path], output: Path, *, config: Path | None, geometry: Path | None,
                    rules: Path | None, compare: bool, video: bool, time_source: str, seed: int | None,
-                   calibration: Path | None) -> None:
+                   calibration: Path | None, scene: str) -> None:
     """``track --pipeline traffic``: seed 003's pipeline; writes tracks, events, summary and report.html."""
     from .fusion.traffic import TrafficParams
     from .fusion.traffic_run import run_traffic
@@ -550,7 +553,7 @@ def _track_traffic(sources: list[Path], output: Path, *, config: Path | None, ge
         task = bar.add_task("tracking (traffic)", total=1.0)
         summary = run_traffic(sources[0], output, geometry=geometry, rules=rules, params=params, compare=compare,
                               video=video, time_source=time_source, progress=lambda f: bar.update(task, completed=f),
-                              calibration=calibration)
+                              calibration=calibration, scene_engine=scene)
     console.print(f"{summary['tracks']} tracks over {summary['duration_s']:.1f} s at {summary['x_real_time']:.1f}x "
                   f"real time; events {summary['events'] or 'none'} -> {output}")
     if "metrics" in summary:

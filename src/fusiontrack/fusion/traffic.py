@@ -246,7 +246,7 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
                   params: TrafficParams | None = None, variants: Iterable[str] = ("fusion_pf",),
                   time_source: str = "header", message_filter: Callable[[Any], Any] | None = None,
                   progress: Callable[[float], None] | None = None, start_ns: int | None = None,
-                  stop_ns: int | None = None, calibration: Any = None) -> TrafficResult:
+                  stop_ns: int | None = None, calibration: Any = None, scene_engine: str = "rules") -> TrafficResult:
     """Run the traffic pipeline over a recording (module docstring).
 
     Parameters
@@ -263,6 +263,10 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
     variants : names of :data:`VARIANTS`
     message_filter : callable(message) -> message or None, optional
         Applied to every sensor message before its branch (``None`` drops it): fault injection.
+    scene_engine : ``"rules"`` or ``"learned"``
+        Scene understanding by the D8 rules (``rules``; default: alarms after their hold times, 10 s for a stopped
+        vehicle, 30 s for a jam) or by the learned behaviour model (D8's supervised alternative,
+        :class:`~fusiontrack.scene.learned.LearnedSceneUnderstanding`: alarms within about 2 s; takes no rules).
     calibration : RoadCalibration or path of its JSON, optional
         Poses the lasers and cameras it names (``fusiontrack calibrate-road``, D1) instead of the recording's
         ``/tf_static`` and ``CameraInfo`` (:func:`~fusiontrack.fusion.traffic_sensors.traffic_branches`).
@@ -298,7 +302,18 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
     roads = roads_of(roads)
     if isinstance(rules, str | Path):
         rules = load_rules(rules)
-    scene = SceneUnderstanding(geometry, rules or default_rules(), sensor="fusion_pf") if geometry else None
+    if scene_engine not in ("rules", "learned"):
+        raise ConfigError(f"scene_engine: expected 'rules' or 'learned', got {scene_engine!r}")
+    if scene_engine == "learned" and rules is not None:
+        raise ConfigError("rules: the learned scene model takes no rules file (scene_engine='learned')")
+    if geometry is None:
+        scene = None
+    elif scene_engine == "learned":
+        from ..scene.learned import LearnedSceneUnderstanding
+
+        scene = LearnedSceneUnderstanding(geometry, sensor="fusion_pf")
+    else:
+        scene = SceneUnderstanding(geometry, rules or default_rules(), sensor="fusion_pf")
     frame_s = 1.0 / p.rate_hz
     pf = VehicleModeTracker(p.tracker, roi_m=_roi_polygon(roads, p.roi_margin_m), sensor="fusion_pf") \
         if "fusion_pf" in variants else None

@@ -73,13 +73,15 @@ def evaluate_traffic(result: TrafficResult, path: str | Path, *, area: Any = Non
 def run_traffic(recording: str | Path, output: str | Path, *, geometry: Any = None, rules: Any = None,
                 params: TrafficParams | None = None, compare: bool = False, video: bool = True,
                 time_source: str = "header", progress: Callable[[float], None] | None = None,
-                variants: Sequence[str] | None = None, calibration: Any = None) -> dict[str, Any]:
+                variants: Sequence[str] | None = None, calibration: Any = None,
+                scene_engine: str = "rules") -> dict[str, Any]:
     """Track, write the outputs (module docstring) and return the summary.
 
     ``compare`` also runs the camera-only, laser-only and fusion-without-particle-filter variants (scored when
     the recording has ground truth). ``calibration`` (a :class:`~fusiontrack.calibration.road.RoadCalibration`
     or its JSON file, from ``fusiontrack calibrate-road``) poses the sensors it names instead of the
-    recording's ``/tf_static``; its residuals go into the summary and the report.
+    recording's ``/tf_static``; its residuals go into the summary and the report. ``scene_engine``: ``"rules"``
+    (D8) or ``"learned"`` (:func:`~fusiontrack.fusion.traffic.track_traffic`).
     """
     if isinstance(calibration, str | Path):
         from ..calibration.road import RoadCalibration
@@ -90,7 +92,8 @@ def run_traffic(recording: str | Path, output: str | Path, *, geometry: Any = No
     if variants is None:
         variants = tuple(VARIANTS) if compare else ("fusion_pf",)
     result = track_traffic(recording, geometry=geometry, rules=rules, params=p, variants=variants,
-                           time_source=time_source, progress=progress, calibration=calibration)
+                           time_source=time_source, progress=progress, calibration=calibration,
+                           scene_engine=scene_engine)
     output.mkdir(parents=True, exist_ok=True)
     states = result.states["fusion_pf"] if "fusion_pf" in result.states else next(iter(result.states.values()))
     write_tracks_csv(output / "tracks.csv", states)
@@ -102,7 +105,7 @@ def run_traffic(recording: str | Path, output: str | Path, *, geometry: Any = No
         "detections_per_sensor": result.detections,
         "messages_skipped": result.errors, "time_s": result.timings_s, "cpu_s": result.cpu_s,
         "x_real_time": result.speed_x_real_time(), "x_real_time_cpu": result.speed_x_real_time(cpu=True),
-        "tracks": len({s.track_id for s in states}),
+        "tracks": len({s.track_id for s in states}), "scene_engine": scene_engine,
         "events": _count_kinds(result.scene_events),
     }
     if calibration is not None:
