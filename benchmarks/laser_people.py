@@ -227,7 +227,8 @@ def main() -> None:
         console.print(sit)
 
         pairs = Table(title="how the scanners see two people by their centre distance (all seeds, after the warm-up): "
-                            "share of pair-frames in one segment / each in its own segment", header_style="bold")
+                            "share of pair-frames in one segment / each in its own segment (both can hold: one leg "
+                            "alone, one shared; neither: one of them hidden)", header_style="bold")
         pairs.add_column("scenario")
         for lo, hi in itertools.pairwise(PAIR_BINS_M):
             pairs.add_column(f"{lo:g}-{hi:g} m", justify="right")

@@ -507,3 +507,31 @@ def test_calibrate_road_command_names_a_bad_file(tmp_path):
     assert "camera_0" in message
     assert "at least 4" in message
     assert not (tmp_path / "c.json").exists()
+
+
+def test_a_surveyed_camera_needs_no_camera_info(tmp_path):
+    # A real site: a camera publishing images only, posed by the survey's homography; a laser without a pose in
+    # tf and not in the survey still gets one (the identity, with a warning); a camera with images but neither
+    # CameraInfo nor survey is left out.
+    from fusiontrack.fusion.traffic_sensors import traffic_branches
+    from fusiontrack.types import Image
+
+    t0 = 1_700_000_000_000_000_000
+    path = tmp_path / "site"
+    with RecordingWriter(path) as w:
+        for cam in ("camera_0", "camera_5"):
+            w.write(Image(t0, cam, cam, np.zeros((48, 64, 3), np.uint8), "bgr8"))
+        w.write(LaserScan(t0, "laser_0", "laser_0", -math.pi / 2, math.pi / 180, 0.1, 30.0,
+                          np.full(181, 10.0, np.float32)))
+    calib = calibrate_road(control_points(1.0, 0.02, np.random.default_rng(0)))
+    calib = RoadCalibration({"camera_0": calib.camera("camera_0")}, {}, "survey.json")
+    with Recording(path) as rec:
+        laser, laser_topics, cams = traffic_branches(rec, np.array([[-50.0, 0.0, 50.0, 0.0, 7.0]]),
+                                                     calibration=calib)
+    assert list(cams) == ["camera_0"]
+    topic, det = cams["camera_0"]
+    assert topic == "/camera_0/image"
+    np.testing.assert_allclose(det.H_img2road / det.H_img2road[2, 2], calib.camera("camera_0").image2road /
+                               calib.camera("camera_0").image2road[2, 2])
+    assert laser is not None
+    assert laser_topics == ["/laser_0/scan"]

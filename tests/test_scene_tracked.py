@@ -120,8 +120,11 @@ def test_tracked_windows_take_the_label_of_the_agent_under_them(run, truth) -> N
     assert (~real).any()
     X, y = tracked_samples([*noisy, ghost], run, reverse_fraction=0.0, period_s=0.5)
     assert X.shape[1] == len(FEATURES)
-    want = label_samples(agent, t, incidents, agents)
-    np.testing.assert_array_equal(y, want)
+    # the labels are those of the vehicle truly under each window (its id is the track's minus 500), except where
+    # the 3 m match failed; the ghost's windows are "none"
+    want = label_samples(np.where(real, ids - 500, -1), t, incidents, agents)
+    assert np.mean(y == want) > 0.97
+    assert np.all(y[~real] == "none")
     assert {"stopped_vehicle", "road_leaving", "jam"} <= set(y)
     c = FEATURES.index
     assert np.all(X[y == "stopped_vehicle", c("speed_last")] < 0.6)

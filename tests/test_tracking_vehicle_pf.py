@@ -203,3 +203,30 @@ def test_detection_buffer_moves_positions_with_velocity_and_drops_stale_frames()
     assert buf.at(1_200_000_000) == {}
     with pytest.raises(ConfigError):
         ObjectFusionParams(gate_m=0)
+
+
+def _braking_behind_an_occluder(params: VehiclePfParams) -> set[int]:
+    """A car at 10 m/s brakes at 3 m/s² to a stop while hidden for 1.5 s (the stop 4.3 m short of where constant
+    velocity puts it), then is seen again, standing: the ids its track had (15 Hz, laser objects)."""
+    rng = np.random.default_rng(4)
+    trk = VehicleModeTracker(params)
+    dt = 1 / 15
+    ids = set()
+    for k in range(75):
+        t = k * dt
+        if t < 2.0:
+            x, v = 10.0 * t, 10.0
+        else:
+            tb = min(t - 2.0, 10.0 / 3.0)
+            x, v = 20.0 + 10.0 * tb - 1.5 * tb**2, 10.0 - 3.0 * tb
+        hidden = 2.0 <= t < 3.5
+        objs = [] if hidden else [_obj((x + rng.normal(0, 0.05), 1.75), _hist(7), vel=(v, 0.0))]
+        ids |= {s.track_id for s in trk.step(round(t * 1e9), objs)}
+    return ids
+
+
+def test_a_vehicle_that_stopped_while_hidden_keeps_its_id():
+    assert _braking_behind_an_occluder(VehiclePfParams(seed=1)) == {1}
+    # without reacquisition the stopped car comes back beyond the gate of its coasting mode: a new id
+    assert len(_braking_behind_an_occluder(VehiclePfParams(seed=1, reacquire_m=1e-6))) == 2
+

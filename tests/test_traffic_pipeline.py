@@ -233,7 +233,7 @@ def test_cli_track_traffic_and_events_rerun(road, tmp_path):
     assert "only for --pipeline traffic" in bad.stderr
     bad = cli("track", str(path), "--pipeline", "traffic", "--tracker", "kalman", "-o", str(tmp_path / "y"))
     assert bad.returncode == 2
-    assert "--tracker: only for the people pipelines" in bad.stderr
+    assert "--tracker: only for the laser people pipelines" in bad.stderr
 
 
 def test_bad_traffic_settings_are_named():

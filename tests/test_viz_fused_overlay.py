@@ -151,6 +151,25 @@ def test_bias_at_is_the_value_at_or_before_and_zero_before_the_first_update():
     assert float(bias_at(h, 250)) == 0.02
 
 
+def test_a_bias_the_pipeline_did_not_apply_is_not_drawn():
+    # The pipeline fuses through the calibrated camera when it did not apply the learnt bias: the overlay draws
+    # that camera (bias 0) while and after learning; an applied one is drawn live, then final.
+    from types import SimpleNamespace
+
+    from fusiontrack.viz.fused_overlay import _bias_source
+
+    h = BiasHistory(np.array([100, 200, 300]), np.array([0.01, 0.02, 0.03]), np.ones(3, np.int64), np.zeros(3))
+    kept = _bias_source(SimpleNamespace(history=h, settled=False, applied=False))
+    assert [kept.at(t)[0] for t in (150, 250, 400)] == [0.0, 0.0, 0.0]
+    assert "not applied" in kept.at(400)[1]
+    applied = _bias_source(SimpleNamespace(history=h, settled=True, applied=True))
+    assert [applied.at(t)[0] for t in (50, 150, 400)] == [0.0, 0.01, 0.03]
+    assert "learning" in applied.at(150)[1]
+    assert "settled" in applied.at(400)[1]
+    whole_run = _bias_source(SimpleNamespace(history=h))  # a BiasRun: learnt to the end, no settled flag
+    assert "live" in whole_run.at(250)[1]
+
+
 def test_projection_drops_nan_and_points_behind_the_camera(crowd):
     cam = crowd["camera"]
     ahead = cam.backproject_to_floor(np.array([[320.0, 400.0]]))[0]

@@ -398,10 +398,19 @@ def track(
         raise ConfigError(f"{given}: only for --pipeline traffic (got --pipeline {pipeline})")
     if not camera_bias and pipeline != "people":
         raise ConfigError(f"--no-camera-bias: only for --pipeline people (got --pipeline {pipeline})")
-    people_only = {"--tracker": tracker_kind != "pf", "--area": area != "auto"}
-    if pipeline in ("traffic", "wearable") and any(people_only.values()):
-        given = ", ".join(k for k, v in people_only.items() if v)
-        raise ConfigError(f"{given}: only for the people pipelines (got --pipeline {pipeline})")
+    if seed is not None and seed < 0:
+        raise ConfigError(f"--seed: expected an integer >= 0, got {seed}")
+    if scene not in ("rules", "learned"):
+        raise ConfigError(f"--scene: expected 'rules' or 'learned', got {scene!r}")
+    if scene == "learned" and rules is not None:
+        raise ConfigError("--rules: the learned scene model (--scene learned) takes no rules file")
+    laser_people = {"--tracker": tracker_kind != "pf", "--area": area != "auto"}
+    if pipeline in ("traffic", "wearable", "people-camera") and any(laser_people.values()):
+        given = ", ".join(k for k, v in laser_people.items() if v)
+        raise ConfigError(f"{given}: only for the laser people pipelines people-laser and people (got --pipeline "
+                          f"{pipeline})")
+    if pipeline == "people-camera" and seed is not None:
+        raise ConfigError("--seed: the people-camera pipeline draws no random numbers (it has no particle filter)")
     if pipeline == "wearable":
         _track_wearable(recordings, output, config=config, seed=seed)
         return

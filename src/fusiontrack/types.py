@@ -470,7 +470,8 @@ class Detection:
         float64 ``(2, 2)`` one (or both ``None`` with a ``box_px``), ``box_px`` float64 ``(4,)`` or ``None``; ``cls`` an
         :class:`ObjectClass` value; ``class_probs`` keys :class:`ObjectClass` values; ``features`` numpy arrays.
         The arrays are not copied but made read-only here: the caller must not keep writing to them (or to the
-        arrays they are views of). A mapping already read-only (``MappingProxyType``) is shared as it is.
+        arrays they are views of). A mapping already read-only (``MappingProxyType``) is shared as it is: pass
+        only another record's ``features`` that way (their arrays are read-only already).
         """
         d = object.__new__(Detection)
         for a in (position_m, covariance_m2, box_px):

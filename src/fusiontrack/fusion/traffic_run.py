@@ -111,7 +111,9 @@ def run_traffic(recording: str | Path, output: str | Path, *, geometry: Any = No
     if calibration is not None:
         from ..calibration.road import residual_table
 
-        summary["calibration"] = {"source": calibration.source, "residuals": residual_table(calibration)}
+        rows = [{k: None if isinstance(v, float) and math.isnan(v) else v for k, v in r.items()}  # JSON null
+                for r in residual_table(calibration)]
+        summary["calibration"] = {"source": calibration.source, "residuals": rows}
     area = None
     world = recording / "ground_truth" / "world.json"
     if world.is_file():

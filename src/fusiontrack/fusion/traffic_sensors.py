@@ -24,6 +24,7 @@ log = logging.getLogger(__name__)
 __all__ = ["traffic_branches"]
 
 _LASER = "sensor_msgs/msg/LaserScan"
+_IMAGES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 
 
 def traffic_branches(rec: Any, roads: Any, *, laser_params: Mapping[str, Any] | None = None,
@@ -66,13 +67,18 @@ def traffic_branches(rec: Any, roads: Any, *, laser_params: Mapping[str, Any] | 
                               f"{sorted(topics)})")
     laser_topics = {rec.sensor_of(t): t for t, i in topics.items()
                     if i.msgtype == _LASER and (chosen is None or t in chosen)}
-    cameras = camera_names(rec)
+    with_info = camera_names(rec)  # cameras the recording can pose itself (CameraInfo + tf)
+    with_images = sorted({rec.sensor_of(t) for t, i in topics.items() if i.msgtype in _IMAGES
+                          and not t.endswith(("/labels", "/depth"))})
+    cameras = sorted(set(with_info) | set(with_images))
     calib = calibration or RoadCalibration()
     for kind, named, have in (("laser", calib.lasers, laser_topics), ("camera", calib.cameras, cameras)):
         unknown = sorted(set(named) - set(have))
         if unknown:
-            raise ConfigError(f"road calibration ({calib.source}): {kind}(s) {unknown} are not in {rec.paths[0]} "
-                              f"(its lasers: {sorted(laser_topics)}, cameras: {sorted(cameras)})")
+            chosen_note = " chosen by [traffic.laser] lasers" if kind == "laser" and chosen is not None else ""
+            raise ConfigError(f"road calibration ({calib.source}): {kind}(s) {unknown} are not among the "
+                              f"{kind}s{chosen_note} of {rec.paths[0]} (its lasers: {sorted(laser_topics)}, "
+                              f"cameras: {cameras})")
 
     laser = None
     if laser_topics:
@@ -82,7 +88,11 @@ def traffic_branches(rec: Any, roads: Any, *, laser_params: Mapping[str, Any] | 
         poses.update({n: calib.laser(n).laser2road for n in laser_topics if n in calib.lasers})
         laser = LaserVehicleDetector(poses, roads, **lparams)
     cams: dict[str, tuple[str, CameraVehicleDetector]] = {}
-    from_info = [c for c in cameras if c not in calib.cameras]
+    unposed = [c for c in cameras if c not in calib.cameras and c not in with_info]
+    if unposed:
+        log.warning("%s: camera(s) %s have images but no CameraInfo and no road calibration: not used",
+                    rec.paths[0], unposed)
+    from_info = [c for c in with_info if c not in calib.cameras]
     if from_info:
         try:
             cams.update(vehicle_detectors_for_recording(rec, roads, cameras=from_info, params=camera_params))

@@ -530,6 +530,11 @@ class LearnedSceneUnderstanding:
         """A track's event begins: it continues a nearby recent event of the same kind (``rejoin_m``,
         ``rejoin_s``) or opens a new one. Returns the event id and the events to report."""
         tid = int(self.control.track_id[slot])
+        # track events that ended longer than rejoin_s ago can no longer be continued: forget them (a live run
+        # would otherwise keep every event it ever opened and scan them all here)
+        stale = [e for e, h in self._holders.items() if not h and t_start_ns - self._ended[e] > self._rejoin_ns]
+        for e in stale:
+            del self._places[e], self._holders[e], self._ended[e]
         if self._rejoin_ns > 0 and np.isfinite(position).all():
             for eid, places in self._places.items():
                 if self.log.kind(eid) != kind:

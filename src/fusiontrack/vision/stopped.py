@@ -235,6 +235,9 @@ class AugmentedMask:
         if frame.shape[:2] != self.shape or mog_foreground.shape != self.shape:
             raise ValueError(f"frame, mog_foreground: expected size {self.shape}, got {frame.shape[:2]} and "
                              f"{mog_foreground.shape}")
+        if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8:
+            raise ValueError(f"frame: expected an (H, W, 3) uint8 image, got {frame.shape} {frame.dtype}")
+        frame = np.ascontiguousarray(frame)  # the pixel gather below views each BGR pixel as one element
         self._frame += 1
         thr2 = np.float32(p.match_threshold2)
         fg_all = mog_foreground.reshape(-1)

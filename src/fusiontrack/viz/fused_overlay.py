@@ -14,7 +14,8 @@ One output frame per image of the camera, the image itself underneath:
   :func:`person_boxes`), its id in :func:`~fusiontrack.vision.overlay.id_colour` (drawn by
   :func:`~fusiontrack.vision.overlay.draw_overlay`: thick while a sensor confirms it, thin and starred while it
   coasts or is merged), and its situation and confirming sensors under the box (``L`` laser, ``C`` camera).
-* **text** — top right: the bias (``bias 2.93 deg (settled)``; ``learning`` while it is being learnt) and the
+* **text** — top right: the bias (``bias 2.93 deg (settled)``; ``learning`` while it is being learnt, ``live`` for
+  a bias learnt over the whole recording, ``not applied`` when the pipeline kept the calibration) and the
   time; bottom left: the events of the last second (merges, splits, identity exchanges).
 
 Frames are produced one at a time from the recording's stream (images wait only until every laser has a scan
@@ -236,10 +237,11 @@ class _Bias:
         if t_ns < int(h.t_ns[0]):
             return 0.0, "bias 0.00 deg (as calibrated)"
         b = float(bias_at(h, t_ns))
-        if t_ns < int(h.t_ns[-1]):
-            return b, f"bias {np.degrees(b):.2f} deg (learning)"
-        if not self.applied:
-            return 0.0, f"bias 0.00 deg (learnt {np.degrees(b):.2f}, not applied)"
+        if not self.applied:  # the pipeline fused through the camera as calibrated: draw that
+            during = "learning" if t_ns < int(h.t_ns[-1]) else "learnt"
+            return 0.0, f"bias 0.00 deg ({during} {np.degrees(b):.2f}, not applied)"
+        if t_ns < int(h.t_ns[-1]):  # a BiasRun learns to the end: its value is the live one, not "learning"
+            return b, f"bias {np.degrees(b):.2f} deg ({'live' if self.settled is None else 'learning'})"
         state = {None: "final", True: "settled", False: "not settled"}[self.settled]
         return b, f"bias {np.degrees(b):.2f} deg ({state})"
 
@@ -500,8 +502,10 @@ def render_fused_overlay(
         pipeline fused, e.g. its ``camera_topic``).
     bias_history : BiasHistory, CameraBias, BiasRun or None
         The camera's horizontal bias over time (``FusionStats.bias``, its ``history``, or
-        :func:`~fusiontrack.calibration.bias_run.bias_from_recording`'s result); None: as calibrated. With a
-        CameraBias the bias after learning is its final one if it was applied, else 0, as the pipeline fused.
+        :func:`~fusiontrack.calibration.bias_run.bias_from_recording`'s result); None: as calibrated. Each frame
+        is drawn through the camera corrected by the bias learnt up to it (the live bias; the pipeline itself
+        fuses every frame through the final one); a CameraBias that was not applied draws 0 throughout, as the
+        pipeline fused.
     events : sequence of Event
         Shown for a second after they end.
     time_source : {"header", "log"}
