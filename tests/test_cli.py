@@ -111,9 +111,10 @@ def test_demo_writes_its_outputs(shared_data, tmp_path):
     assert people["camera_frames_read_by_fusion"] <= people["camera_frames"]  # the camera read only when needed
     report = (out / "report.html").read_text()
     for part in ("Camera bias convergence", "camera only", "fusion", "Time cost", "camera_overlay.mp4",
-                 "data:image/png;base64"):
+                 "fusion_overlay.mp4", "data:image/png;base64"):
         assert part in report
     assert (out / "camera_overlay.mp4").stat().st_size > 0
+    assert (out / "fusion_overlay.mp4").stat().st_size > 0
     assert summary["input"]["topics"][0]["count"] == 1265
     assert summary["converted"]["topics"][0]["count"] == 1265
     assert summary["preview"]["frames"] == 1265
@@ -216,3 +217,20 @@ def test_train_classifier_writes_a_model_that_loads(shared_data, tmp_path):
     model = ObjectClassifier.load(target)
     assert model.classes == ("person", "bicycle", "car")
     assert model.alpha.size == 20
+
+
+def test_track_people_writes_the_bias_and_the_overlay(tmp_path):
+    # The fused people pipeline from the command line: a crowd whose camera is 3 degrees off its calibration.
+    rec = tmp_path / "crowd"
+    run("simulate", "crowd", "--seconds", "5", "--seed", "2", "--set", "agents.mean_present=4", "-o", str(rec))
+    out = tmp_path / "fused"
+    printed = run("track", str(rec), "--pipeline", "people", "-o", str(out)).stdout
+    assert "horizontal bias" in printed
+    assert "overlay:" in printed
+    for name in ("tracks.csv", "tracks.jsonl", "bias.csv", "tracks.mp4", "overlay.mp4"):
+        assert (out / name).stat().st_size > 0
+    with Recording(rec) as r:
+        images = r.topics()["/camera_0/image"].count
+    cap = cv2.VideoCapture(str(out / "overlay.mp4"))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == images  # one overlay frame per camera image
+    cap.release()
