@@ -254,7 +254,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--seconds", type=float, default=60.0)
-    ap.add_argument("--keep", type=Path, default=None, help="keep the recordings in this folder")
+    ap.add_argument("--keep", type=Path, default=None,
+                    help="keep the recordings (about 1.6 GB per seed and minute: mind the disk), tracks and events "
+                         "in this folder")
     ap.add_argument("--camera-every", type=int, default=None, help="TrafficParams.camera_every (default: its own)")
     ap.add_argument("--laser-every", type=int, default=None, help="TrafficParams.laser_every (default: its own)")
     ap.add_argument("--processing-scale", type=int, default=None,
