@@ -392,6 +392,7 @@ class VehicleModeTracker:
             if k is not None:
                 self._reacquire(t_ns, k, o)
                 reacquired.add(k)
+                centres[k] = o.position_m  # where it is now, for the objects after this one
                 continue
             reach = max(p.d_new_m, 3.0 * math.sqrt(0.5 * np.trace(o.covariance_m2)))  # an imprecise object: 3 σ
             if centres.shape[0] and np.min(np.linalg.norm(centres - o.position_m, axis=1)) < reach:
