@@ -75,3 +75,33 @@ def test_trackstate_trusted_equals_checked() -> None:
     fast = TrackState.trusted(20, "fusion_pf", 4, pos.copy(), vel.copy(), cov.copy(), cls="car",
                               sensors=("camera_0", "laser_0"), score=0.5)
     _same(fast, checked)
+
+
+def test_records_with_read_only_mappings_survive_pickling() -> None:
+    """Detections, events and ground truth cross process boundaries (the traffic pipeline's camera workers):
+    a pickle round trip gives an equal record, still read-only."""
+    import pickle
+
+    from fusiontrack.types import Event, GroundTruth, records_equal
+
+    recs = [
+        Detection(t_ns=5, sensor="camera_0", position_m=[1.0, 2.0], box_px=[1, 2, 30, 40], cls="car",
+                  class_probs={"car": 0.9}, features={"hist_hsv": np.arange(6.0), "track_id": np.array([3])}),
+        Detection.trusted(6, "laser_0", np.zeros(2), np.eye(2), None, 0.5, "car", features={"a": np.ones(2)}),
+        Event(t_ns=7, sensor="fusion_pf", kind="jam", position_m=[3.0, 4.0], track_ids=(1, 2),
+              attributes={"alarm_t_ns": 9}),
+        GroundTruth(t_ns=8, sensor="sim", frame_id="world", ids=[1, 2], positions_m=np.zeros((2, 2)),
+                    classes=("car", "person"), attributes={"heading_rad": np.array([0.1, 0.2])}),
+    ]
+    for rec in recs:
+        back = pickle.loads(pickle.dumps(rec))
+        assert type(back) is type(rec)
+        assert records_equal(rec, back)
+        for name in type(rec).__slots__:
+            v = getattr(back, name)
+            if isinstance(v, np.ndarray):
+                assert not v.flags.writeable, name
+            if name in ("features", "class_probs", "attributes"):
+                with pytest.raises(TypeError):
+                    v["new"] = 1
+                assert all(not a.flags.writeable for a in v.values() if isinstance(a, np.ndarray))

@@ -84,6 +84,25 @@ def _set(obj: object, name: str, value: Any) -> None:
     object.__setattr__(obj, name, value)
 
 
+def _rebuild_record(cls: type, values: tuple[tuple[bool, Any], ...]) -> Any:
+    """Unpickle a record of :func:`_reduce_record`: its read-only mappings and arrays read-only again."""
+    obj = object.__new__(cls)
+    for f, (proxy, v) in zip(dataclasses.fields(cls), values, strict=True):
+        for a in (v.values() if proxy else (v,)):
+            if isinstance(a, np.ndarray):
+                a.setflags(write=False)
+        _set(obj, f.name, MappingProxyType(v) if proxy else v)
+    return obj
+
+
+def _reduce_record(self: Any) -> tuple[Any, ...]:
+    """Pickle support for the records holding read-only mappings (``MappingProxyType`` cannot be pickled): the
+    fields as they are, without the constructor's checks (they passed them), e.g. a camera worker's detections."""
+    values = tuple((isinstance(v, MappingProxyType), dict(v) if isinstance(v, MappingProxyType) else v)
+                   for v in (getattr(self, f.name) for f in dataclasses.fields(self)))
+    return _rebuild_record, (type(self), values)
+
+
 def _check_time(t_ns: Any, name: str = "t_ns") -> int:
     if isinstance(t_ns, bool) or not isinstance(t_ns, int | np.integer):
         raise TypeError(f"{name}: expected an integer number of nanoseconds, got {type(t_ns).__name__}")
@@ -419,6 +438,8 @@ class GroundTruth:
     def __len__(self) -> int:
         return int(self.ids.size)
 
+    __reduce__ = _reduce_record
+
 
 @dataclass(frozen=True, slots=True, eq=False)
 class Detection:
@@ -457,6 +478,8 @@ class Detection:
                                                      for k, v in self.class_probs.items()}))
         _set(self, "features", MappingProxyType({k: _frozen_array(v, None, None, f"Detection.features[{k!r}]")
                                                   for k, v in self.features.items()}))
+
+    __reduce__ = _reduce_record
 
     @staticmethod
     def trusted(t_ns: int, sensor: str, position_m: np.ndarray | None = None, covariance_m2: np.ndarray | None = None,
@@ -630,6 +653,8 @@ class Event:
         _set(self, "position_m", _optional_array(self.position_m, np.float64, (2,), "Event.position_m"))
         _set(self, "track_ids", tuple(int(i) for i in self.track_ids))
         _set(self, "attributes", MappingProxyType(dict(self.attributes)))
+
+    __reduce__ = _reduce_record
 
 
 Message = LaserScan | Image | DepthImage | ImuSample | CameraInfo | Odometry | Transform | GroundTruth
