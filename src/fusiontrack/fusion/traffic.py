@@ -24,6 +24,7 @@ import json
 import logging
 import math
 import time
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, fields
@@ -38,6 +39,7 @@ from ..tracking.baseline import CVKalmanTracker
 from ..tracking.vehicle_pf import FusedObject, VehicleModeTracker, VehiclePfParams
 from ..types import Detection, Event, Image, LaserScan, TrackState
 from .objects import DetectionBuffer, ObjectFusionParams, fuse_objects, sensor_kind
+from .traffic_workers import CameraJob, CameraWorkers, default_workers
 
 log = logging.getLogger(__name__)
 
@@ -80,6 +82,11 @@ class TrafficParams:
     The pipeline runs OpenCV single-threaded (``cv2.setNumThreads(1)``, restored after the run): its images are
     small, and OpenCV's worker threads cost more CPU than they save (0.7-0.8 ms of CPU per camera frame of
     9-10 ms, measured frame by frame on the simulated road, the same detections).
+
+    ``workers`` camera branches run in worker processes beside the main one (``fusion/traffic_workers.py``): the
+    camera branch is two thirds of the work, and the tracks are those of the serial run, bit for bit. Default
+    (``None``): one per camera within the cores this process may use, minus one for the main process (one worker
+    for both cameras on 2 cores); 0 runs everything in this process.
     """
 
     rate_hz: float = 15.0
@@ -92,6 +99,7 @@ class TrafficParams:
     roi_margin_m: float = 5.0
     camera_every: int = 2
     laser_every: int = 2
+    workers: int | None = None
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.rate_hz) and 0.5 <= self.rate_hz <= 100):
@@ -100,6 +108,10 @@ class TrafficParams:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ConfigError(f"traffic.{name}: expected an integer >= 1, got {v!r}")
+        w = self.workers
+        if w is not None and (isinstance(w, bool) or not isinstance(w, int) or w < 0):
+            raise ConfigError(f"traffic.workers: expected an integer >= 0 (0: no worker processes) or none for "
+                              f"one per camera within the cores, got {w!r}")
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], source: str = "[traffic]") -> TrafficParams:
@@ -113,7 +125,7 @@ class TrafficParams:
             raise ConfigError(f"{source}: unknown key(s) {unknown}; expected some of {sorted(names)}")
         kw: dict[str, Any] = {k: v for k, v in values.items() if k in ("rate_hz", "roi_margin_m", "kalman",
                                                                       "laser", "camera", "camera_every",
-                                                                      "laser_every")}
+                                                                      "laser_every", "workers")}
         if "fusion" in values:
             kw["fusion"] = as_params(dict(values["fusion"]), f"{source}.fusion")
         if "tracker" in values:
@@ -128,8 +140,11 @@ class TrafficResult:
     ``timings_s`` is the wall-clock time spent per part, ``cpu_s`` the CPU time of the process (every thread) per
     part: on a shared machine the wall clock also counts the time other processes held the cores. The parts are
     ``read`` (reading and decoding the recording's messages, the skipped frames and scans included), the branches
-    (``laser_branch``, ``camera_branch``), the trackers of the variants and ``scene``. ``fused_ticks`` counts, per
-    sensor, the fusion instants at which a frame of it was recent enough to take part.
+    (``laser_branch``, ``camera_branch``), ``dispatch`` (with camera workers: sending frames, waiting for and
+    taking in their results), the trackers of the variants and ``scene``; with ``workers`` > 0 the camera branch's
+    times are the workers' own. ``elapsed_s`` is the whole run by the wall clock and ``total_cpu_s`` its CPU time,
+    the main process and the workers together. ``fused_ticks`` counts, per sensor, the fusion instants at which a
+    frame of it was recent enough to take part.
     """
 
     states: dict[str, list[TrackState]]
@@ -144,9 +159,22 @@ class TrafficResult:
     t0_ns: int = 0
     cpu_s: dict[str, float] = field(default_factory=dict)
     fused_ticks: dict[str, int] = field(default_factory=dict)
+    elapsed_s: float = 0.0
+    total_cpu_s: float = 0.0
+    workers: int = 0
 
-    def speed_x_real_time(self, parts: Sequence[str] = ("read", "laser_branch", "camera_branch", "fusion_pf",
-                                                        "scene"), cpu: bool = False) -> float:
+    def real_time_factor(self) -> float:
+        """Recording seconds per second of the run, by the wall clock from opening the recording to the last
+        track (everything a user waits for, with the camera workers running beside the main process)."""
+        return self.duration_s / self.elapsed_s if self.elapsed_s > 0 else math.inf
+
+    def cpu_real_time_factor(self) -> float:
+        """Recording seconds per second of CPU, the main process (every thread) and the camera workers together:
+        the cost, whatever the cores."""
+        return self.duration_s / self.total_cpu_s if self.total_cpu_s > 0 else math.inf
+
+    def speed_x_real_time(self, parts: Sequence[str] = ("read", "laser_branch", "camera_branch", "dispatch",
+                                                        "fusion_pf", "scene"), cpu: bool = False) -> float:
         """Recording seconds per processing second of the named parts (by default what a user of ``fusion_pf``
         waits for: reading the recording, the branches, the particle filter and scene understanding); by the
         wall clock, or by CPU time (``cpu``)."""
@@ -322,7 +350,7 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
     states: dict[str, list[TrackState]] = {v: [] for v in variants}
     tracker_events: list[Event] = []
     scene_events: list[Event] = []
-    timings = dict.fromkeys(("read", "laser_branch", "camera_branch", *variants, "scene"), 0.0)
+    timings = dict.fromkeys(("read", "laser_branch", "camera_branch", "dispatch", *variants, "scene"), 0.0)
     cpu = dict.fromkeys(timings, 0.0)
     clock: dict[str, tuple[float, float]] = {}
 
@@ -337,6 +365,8 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
     counts: dict[str, int] = {}
     errors: dict[str, int] = {}
     buffer = DetectionBuffer(max(p.fusion.max_age_s, frame_s))
+    wall_start, cpu_start = time.perf_counter(), time.process_time()
+    worker_cpu, n_workers = 0.0, 0
     with Recording(path) as rec, _opencv_threads(1):
         cam_params = VehicleDetectorParams(**dict(p.camera)) if p.camera else None
         laser, laser_topics, cams = traffic_branches(rec, roads, laser_params=p.laser, camera_params=cam_params,
@@ -379,61 +409,123 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
                     scene.update(t_ns, out)
                     stop("scene")
 
-        stream = iter(rec.messages(topics, time_source=time_source, start_ns=start_ns, stop_ns=stop_ns))
-        while True:
-            start("read")  # reading and decoding, the frames and scans a branch skips included
-            try:
-                msg = next(stream)
-            except StopIteration:
-                break
-            finally:
-                stop("read")
-            if message_filter is not None:
-                msg = message_filter(msg)
-                if msg is None:
-                    continue
-            t = msg.t_ns
-            if next_tick is None:
-                next_tick = first_t = t
-            while t >= next_tick:
-                tick(next_tick)
+        # Every effect on the fusion's state (a tick, a sensor's period, a branch's detections) is an event run in
+        # recording order. Serially each runs at once; with camera workers a frame's detections come back later,
+        # and the events after it wait in `pending` until they are back, so the run is the serial one.
+        n_workers = p.workers if p.workers is not None else default_workers(len(cam_by_sensor))
+        pool = CameraWorkers(cam_by_sensor, n_workers) if n_workers > 0 and cam_by_sensor else None
+        n_workers = pool.n_workers if pool is not None else 0
+        pending: deque[tuple[Any, ...]] = deque()
+
+        def run(ev: tuple[Any, ...]) -> None:
+            nonlocal n_ticks
+            kind = ev[0]
+            if kind == "tick":
+                tick(ev[1])
                 n_ticks += 1
-                next_tick += round(frame_s * 1e9)
-            last_t = t
-            part = ""
-            try:
-                if isinstance(msg, LaserScan) and laser is not None:
-                    seen[msg.sensor] = seen.get(msg.sensor, -1) + 1
-                    buffer.note(msg.sensor, t)  # its period, skipped scans included
-                    every = p.laser_every
-                    if seen[msg.sensor] % p.laser_every:
-                        continue
-                    part = "laser_branch"
-                    start(part)
-                    dets = laser(msg)
-                elif isinstance(msg, Image) and msg.sensor in cam_by_sensor and msg.encoding != "mono16":
-                    seen[msg.sensor] = seen.get(msg.sensor, -1) + 1
-                    buffer.note(msg.sensor, t)
-                    every = p.camera_every
-                    if seen[msg.sensor] % p.camera_every:
-                        continue
-                    part = "camera_branch"
-                    start(part)
-                    dets = cam_by_sensor[msg.sensor](msg)
-                else:
-                    continue
-                stop(part)
-            except (ValueError, FloatingPointError) as err:  # bad data in one message: skip it, keep going
-                if part in clock:
-                    stop(part)
-                errors[msg.sensor] = errors.get(msg.sensor, 0) + 1
-                log.warning("%s at %d ns: message skipped (%s)", msg.sensor, t, err)
-                continue
-            counts[msg.sensor] = counts.get(msg.sensor, 0) + len(dets)
-            buffer.put(msg.sensor, t, dets, every=every)
-            first_frame.setdefault(msg.sensor, n_ticks)
+                return
+            if kind == "note":
+                buffer.note(ev[1], ev[2])
+                return
+            _, sensor, t_ns, every, dets = ev
+            if isinstance(dets, CameraJob):
+                job = dets
+                cpu["camera_branch"] += job.cpu_s
+                timings["camera_branch"] += job.wall_s
+                if job.error is not None:
+                    errors[sensor] = errors.get(sensor, 0) + 1
+                    log.warning("%s at %d ns: message skipped (%s)", sensor, t_ns, job.error)
+                    return
+                dets = job.detections
+            counts[sensor] = counts.get(sensor, 0) + len(dets)
+            buffer.put(sensor, t_ns, dets, every=every)
+            first_frame.setdefault(sensor, n_ticks)
             if progress is not None:
-                progress(min(1.0, (t - t_first) / span))
+                progress(min(1.0, (t_ns - t_first) / span))
+
+        def emit(*ev: Any) -> None:
+            if pending or (ev[0] == "put" and isinstance(ev[4], CameraJob) and not ev[4].done):
+                pending.append(ev)
+            else:
+                run(ev)
+
+        def flush(block: bool) -> None:
+            if pool is not None and pending:
+                start("dispatch")
+                pool.poll()
+                stop("dispatch")
+            while pending:
+                head = pending[0]
+                if head[0] == "put" and isinstance(head[4], CameraJob) and not head[4].done:
+                    if not block:
+                        return
+                    start("dispatch")
+                    pool.wait(head[4])  # type: ignore[union-attr]
+                    stop("dispatch")
+                run(pending.popleft())
+
+        try:
+            stream = iter(rec.messages(topics, time_source=time_source, start_ns=start_ns, stop_ns=stop_ns))
+            while True:
+                start("read")  # reading and decoding, the frames and scans a branch skips included
+                try:
+                    msg = next(stream)
+                except StopIteration:
+                    break
+                finally:
+                    stop("read")
+                if message_filter is not None:
+                    msg = message_filter(msg)
+                    if msg is None:
+                        continue
+                t = msg.t_ns
+                if next_tick is None:
+                    next_tick = first_t = t
+                while t >= next_tick:
+                    emit("tick", next_tick)
+                    next_tick += round(frame_s * 1e9)
+                last_t = t
+                part = ""
+                try:
+                    if isinstance(msg, LaserScan) and laser is not None:
+                        seen[msg.sensor] = seen.get(msg.sensor, -1) + 1
+                        emit("note", msg.sensor, t)  # its period, skipped scans included
+                        every = p.laser_every
+                        if seen[msg.sensor] % p.laser_every:
+                            continue
+                        part = "laser_branch"
+                        start(part)
+                        dets: Any = laser(msg)
+                    elif isinstance(msg, Image) and msg.sensor in cam_by_sensor and msg.encoding != "mono16":
+                        seen[msg.sensor] = seen.get(msg.sensor, -1) + 1
+                        emit("note", msg.sensor, t)
+                        every = p.camera_every
+                        if seen[msg.sensor] % p.camera_every:
+                            continue
+                        if pool is not None:
+                            part = "dispatch"
+                            start(part)
+                            dets = pool.submit(msg.sensor, msg)
+                        else:
+                            part = "camera_branch"
+                            start(part)
+                            dets = cam_by_sensor[msg.sensor](msg)
+                    else:
+                        continue
+                    stop(part)
+                except (ValueError, FloatingPointError) as err:  # bad data in one message: skip it, keep going
+                    if part in clock:
+                        stop(part)
+                    errors[msg.sensor] = errors.get(msg.sensor, 0) + 1
+                    log.warning("%s at %d ns: message skipped (%s)", msg.sensor, t, err)
+                    continue
+                emit("put", msg.sensor, t, every, dets)
+                flush(block=False)
+            flush(block=True)
+        finally:
+            if pool is not None:
+                pool.close()
+                worker_cpu = pool.cpu_s
         if scene is not None:
             scene_events = scene.events  # ended ones with their end, open ones with t_end_ns None
         for s, k in first_frame.items():
@@ -444,4 +536,5 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
                             fused.get(s, 0), due, buffer.age_limit_s(s))
     duration = (last_t - first_t) / 1e9 if last_t is not None and first_t is not None else 0.0
     return TrafficResult(states, tracker_events, scene_events, sensors, n_ticks, duration, timings, counts, errors,
-                         first_t or 0, cpu, fused)
+                         first_t or 0, cpu, fused, elapsed_s=time.perf_counter() - wall_start,
+                         total_cpu_s=time.process_time() - cpu_start + worker_cpu, workers=n_workers)

@@ -1,0 +1,121 @@
+"""The traffic pipeline's camera branches in worker processes: the serial run's tracks bit for bit, bad frames
+skipped as serially, and a worker's failure raised (never a hang)."""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from fusiontrack.errors import ConfigError
+from fusiontrack.fusion.traffic import TrafficParams, track_traffic
+from fusiontrack.fusion.traffic_workers import CameraWorkers, available, default_workers
+from fusiontrack.io.recording import Recording
+from fusiontrack.sim.scenario import load_scenario
+from fusiontrack.sim.simulator import simulate
+from fusiontrack.types import Image, records_equal
+
+pytestmark = pytest.mark.skipif(not available(), reason="worker processes need the 'fork' start method")
+
+
+@pytest.fixture(scope="module")
+def road(tmp_path_factory):
+    out = tmp_path_factory.mktemp("road_workers") / "road"
+    simulate(load_scenario("road").with_overrides(seconds=8.0, seed=1), out)
+    with Recording(out) as rec:
+        t_bad = rec.start_ns + int(4e9)
+    return out, t_bad
+
+
+def _same(a, b) -> bool:
+    return len(a) == len(b) and all(records_equal(x, y) for x, y in zip(a, b, strict=True))
+
+
+def test_camera_workers_give_the_serial_run_bit_for_bit(road):
+    path, t_bad = road
+    state = {"done": False}
+
+    def one_bad_frame(msg):  # a frame of the wrong size: camera_0's branch rejects it (ValueError), once
+        if isinstance(msg, Image) and msg.sensor == "camera_0" and msg.t_ns >= t_bad and not state["done"]:
+            state["done"] = True
+            return replace(msg, pixels=np.ascontiguousarray(msg.pixels[:-8]))
+        return msg
+
+    runs = {}
+    for n in (0, 1, 2):
+        state["done"] = False
+        runs[n] = track_traffic(path, params=TrafficParams(workers=n), variants=("camera", "fusion_pf"),
+                                message_filter=one_bad_frame)
+    serial = runs[0]
+    assert serial.workers == 0
+    assert serial.errors == {"camera_0": 1}
+    assert len(serial.states["fusion_pf"]) > 100
+    for n in (1, 2):
+        par = runs[n]
+        assert par.workers == n
+        for v in serial.states:
+            assert _same(serial.states[v], par.states[v]), (n, v)
+        assert _same(serial.scene_events, par.scene_events)
+        assert _same(serial.tracker_events, par.tracker_events)
+        assert par.detections == serial.detections
+        assert par.errors == serial.errors
+        assert par.fused_ticks == serial.fused_ticks
+        assert par.n_ticks == serial.n_ticks
+        # the camera branch's CPU is the workers' own, counted in the run's total with the main process's
+        assert 0 < par.cpu_s["camera_branch"] <= par.total_cpu_s
+        assert par.cpu_s["dispatch"] > 0
+    assert not mp.active_children(), "the workers are stopped after the run"
+
+
+def _raise_type_error(image):
+    raise TypeError(f"a bug in the branch ({image})")
+
+
+def _die(image):
+    os._exit(3)
+
+
+def _echo(image):
+    return [image]
+
+
+def test_a_bug_in_a_worker_is_raised_in_the_main_process():
+    with CameraWorkers({"cam": _raise_type_error}, 1) as pool:
+        job = pool.submit("cam", 1)
+        with pytest.raises(RuntimeError, match="TypeError: a bug in the branch"):
+            pool.wait(job)
+    assert not mp.active_children()
+
+
+def test_a_worker_that_dies_is_reported_not_waited_for():
+    with CameraWorkers({"cam": _die}, 1) as pool:
+        job = pool.submit("cam", 1)
+        with pytest.raises(RuntimeError, match="ended unexpectedly"):
+            pool.wait(job)
+    assert not mp.active_children()
+
+
+def test_results_come_back_in_order_per_camera_with_bounded_frames_in_flight():
+    with CameraWorkers({"a": _echo, "b": _echo}, 2, max_in_flight=2) as pool:
+        jobs = [pool.submit("a" if i % 3 else "b", i) for i in range(20)]  # waits whenever 2 are out
+        for job in jobs:
+            pool.wait(job)
+        assert [j.detections[0] for j in jobs] == list(range(20))
+        assert {j.worker for j in jobs if j.sensor == "a"} != {j.worker for j in jobs if j.sensor == "b"}
+
+
+def test_bad_worker_settings_are_named():
+    with pytest.raises(ValueError, match="detectors"):
+        CameraWorkers({}, 1)
+    for bad in (0, True, 1.5):
+        with pytest.raises(ValueError, match="n_workers"):
+            CameraWorkers({"cam": _echo}, bad)
+        with pytest.raises(ConfigError, match=r"traffic\.workers"):
+            TrafficParams(workers=bad if bad != 0 else -1)
+    assert TrafficParams.from_mapping({"workers": 0}).workers == 0
+    assert default_workers(0) == 0
+    cores = len(os.sched_getaffinity(0))
+    assert default_workers(2) == (0 if cores < 2 else min(2, cores - 1))
