@@ -246,6 +246,7 @@ class ForegroundModel:
         self._shape: tuple[int, int] | None = None
         self._aug: AugmentedMask | None = None
         self._background: np.ndarray | None = None
+        self._background_frame = 0  # the frame count when it was taken
         self._n_frames = 0  # frames the model has learned from (black frames excluded)
         self._boost_left = 0
         self._warned_black = False
@@ -279,6 +280,21 @@ class ForegroundModel:
         if self._shape is None:
             raise ValueError("background_image: no frame has been applied yet")
         return self._mog.getBackgroundImage()
+
+    def recent_background_image(self) -> np.ndarray:
+        """MOG2's background image as A3 last used it: refreshed every ``background_every`` frames and in every
+        frame while relearning (read-only; one refresh serves A3 and any caller that can use the same age)."""
+        if self._shape is None:
+            raise ValueError("recent_background_image: no frame has been applied yet")
+        if self._background is None or self._boost_left > 0 or self._n_frames - self._background_frame >= \
+                self.params.background_every:
+            self._refresh_background()
+        return self._background
+
+    def _refresh_background(self) -> None:
+        self._background = self._mog.getBackgroundImage()
+        self._background.setflags(write=False)
+        self._background_frame = self._n_frames
 
     # -- per frame ----------------------------------------------------------------------------------
 
@@ -351,7 +367,7 @@ class ForegroundModel:
             idx = np.flatnonzero(union)
             if idx.size:
                 if relearning or self._background is None or (self._n_frames - 1) % p.background_every == 0:
-                    self._background = self._mog.getBackgroundImage()
+                    self._refresh_background()
                 x = np.take(bgr.reshape(-1, 3), idx, axis=0)
                 e = np.take(self._background.reshape(-1, 3), idx, axis=0).astype(np.float32)
                 if self._aug is not None:  # under a stopped object MOG2 has learned the object: use A2's memory

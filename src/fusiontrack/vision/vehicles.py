@@ -214,9 +214,6 @@ class VehicleDetectorParams:
         (4.2 m: a truck or bus of 3-4 m and more; the class priors, 1.5-1.7 m, are only what the detector
         assumes of a vehicle it cannot see whole). The foreground model's illumination test still looks at the
         whole frame (:meth:`CameraVehicleDetector._illumination_test`).
-    background_every : int
-        MOG2's background image, which the road memory veto compares against, is refreshed every this many
-        frames (4: it changes at the rate α = 0.002 per frame), and at every frame while MoG relearns.
     processing_scale : int
         The window is shrunk by this factor (``cv2.INTER_AREA``) before A1-A4 and the road memory, the
         morphology, minimum areas and the road memory's dilation scaled with it, and the blobs' label image is
@@ -261,7 +258,6 @@ class VehicleDetectorParams:
     crop_to_road: bool = True
     window_margin_m: float = 3.0
     window_height_m: float = 4.2
-    background_every: int = 4
     processing_scale: int = 1
 
     def __post_init__(self) -> None:
@@ -270,9 +266,9 @@ class VehicleDetectorParams:
                               f"{type(self.foreground).__name__}")
         if not isinstance(self.blobs, BlobParams):
             raise ConfigError(f"VehicleDetectorParams.blobs: expected BlobParams, got {type(self.blobs).__name__}")
-        for name in ("n_confirm", "min_area_px", "road_memory_warmup", "background_every", "processing_scale"):
+        for name in ("n_confirm", "min_area_px", "road_memory_warmup", "processing_scale"):
             v = getattr(self, name)
-            lo = 1 if name in ("n_confirm", "background_every", "processing_scale") else 0
+            lo = 1 if name in ("n_confirm", "processing_scale") else 0
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 raise ConfigError(f"VehicleDetectorParams.{name}: expected an integer >= {lo}, got {v!r}")
         for name in ("shadow_bridge_max_fraction", "fragment_containment", "road_memory_rate", "road_memory_tolerance"):
@@ -783,18 +779,22 @@ class CameraVehicleDetector:
         self._roi: np.ndarray | None = None
         self._window: tuple[int, int, int, int] | None = None
         self._size: tuple[int, int] | None = None
-        self._bg_image: np.ndarray | None = None
-        self._bg_frame = -1
         self._road: np.ndarray | None = None
         self._road_sample = np.zeros(0, np.int64)
         self._road_gain = 1.0
+        self._gain_frame = -1  # the frame it was measured in
         self._tracks: list[_Track] = []
         self._next_id = 1
         self._t_ns: int | None = None
         self.last_foreground: ForegroundResult | None = None
-        self.last_mask: np.ndarray | None = None
+        self._last_labels: np.ndarray | None = None  # the last frame's blob labels (whole frame), or a mask
         self.n_frames = 0
         self.n_skipped = 0
+
+    @property
+    def last_mask(self) -> np.ndarray | None:
+        """The vehicle pixels ``(H, W)`` bool of the last frame (made on demand from its blob labels)."""
+        return None if self._last_labels is None else self._last_labels > 0
 
     @property
     def n_illumination_events(self) -> int:
@@ -980,7 +980,7 @@ class CameraVehicleDetector:
         self.last_foreground = fg
         if not fg.valid:  # a black frame: the model is untouched; tracks coast by time at the next frame
             self.n_skipped += 1
-            self.last_mask = np.zeros((h, w), bool)
+            self._last_labels = np.zeros((h, w), bool)
             return []
         bgr = np.ascontiguousarray(bgr)
         dt = self.params.frame_dt_s if self._t_ns is None else (t - self._t_ns) * 1e-9
@@ -989,7 +989,7 @@ class CameraVehicleDetector:
         blobs = self._vehicle_blobs(self._road_memory_veto(sub, fg))
         self._update_road_memory(sub, blobs.label_image > 0, self.roi_mask(w, h)[v0:v1:sc, u0:u1:sc])
         blobs = _in_frame(blobs, (u0, v0), (h, w), sc)
-        self.last_mask = blobs.label_image > 0
+        self._last_labels = blobs.label_image
         return self._detect(t, dt, bgr, blobs)
 
     def _illumination_test(self, bgr: np.ndarray, window: tuple[int, int, int, int]) -> None:
@@ -1027,12 +1027,10 @@ class CameraVehicleDetector:
         if thr != self._fg.params.illumination_fraction:
             self._fg.params = replace(base, illumination_fraction=thr)
 
-    def _background_image(self, relearning: bool) -> np.ndarray:
-        """MOG2's background image, refreshed every ``background_every`` frames and while relearning."""
-        if self._bg_image is None or relearning or self.n_frames - self._bg_frame >= self.params.background_every:
-            self._bg_image = self._fg.background_image()
-            self._bg_frame = self.n_frames
-        return self._bg_image
+    def _background_image(self) -> np.ndarray:
+        """MOG2's background image as the foreground model's A3 last took it (``foreground.background_every``:
+        at most 4 frames old; it changes at the rate α = 0.002 per frame), fresh in every frame while relearning."""
+        return self._fg.recent_background_image()
 
     def _road_memory_veto(self, bgr: np.ndarray, fg: ForegroundResult) -> np.ndarray:
         """A3's labels with the foreground pixels that show the remembered empty road, where the background models
@@ -1043,11 +1041,12 @@ class CameraVehicleDetector:
         colour", a stopped object for good, to A2 (a trail of false vehicle pixels along the lane). The road
         memory ``R`` is learned only where no vehicle was seen, at ``road_memory_rate``, in the light of its first
         frame; the frame's gain ``γ`` against it is the median brightness distortion (A3's ``a``) of a sample of
-        the road pixels seen as background. A pixel is the road when its ``|a/γ − 1|`` and chromaticity distortion
-        against ``R`` are both within ``road_memory_tolerance``; it is vetoed when only A2 holds it, or when
-        MOG2's background there no longer is the road (a grey car far away can look like the road to this test,
-        but MOG2 then still has the road and it stays). A vehicle stopped on the road is not learned (it is in the
-        vehicle mask) and does not look like the road, so it stays.
+        the road pixels seen as background (measured every 4th frame, when the memory learns, and in every frame
+        while MoG relearns after an illumination change: the light changes slowly otherwise). A pixel is the road
+        when its ``|a/γ − 1|`` and chromaticity distortion against ``R`` are both within ``road_memory_tolerance``;
+        it is vetoed when only A2 holds it, or when MOG2's background there no longer is the road (a grey car far
+        away can look like the road to this test, but MOG2 then still has the road and it stays). A vehicle stopped
+        on the road is not learned (it is in the vehicle mask) and does not look like the road, so it stays.
         """
         p = self.params
         labels = fg.labels
@@ -1056,23 +1055,26 @@ class CameraVehicleDetector:
         flat = labels.reshape(-1)
         x = bgr.reshape(-1, 3)
         road = self._road.reshape(-1, 3)
-        sample = self._road_sample[flat[self._road_sample] == PixelLabel.BACKGROUND]
-        if sample.size < 100:
-            return labels
-        a, _ = brightness_chromaticity(x[sample], road[sample])
-        gain = float(np.median(a))
-        self._road_gain = gain
+        if self._gain_frame < 0 or fg.relearning or self.n_frames - self._gain_frame >= 4:
+            sample = self._road_sample[flat[self._road_sample] == PixelLabel.BACKGROUND]
+            if sample.size < 100:
+                return labels
+            a, _ = brightness_chromaticity(np.take(x, sample, axis=0), np.take(road, sample, axis=0))
+            self._road_gain, self._gain_frame = float(np.median(a)), self.n_frames
+        gain = self._road_gain
         idx = np.flatnonzero(flat != PixelLabel.BACKGROUND)
         if idx.size == 0 or not gain > 0:
             return labels
         g, tol = np.float32(gain), np.float32(p.road_memory_tolerance)
-        a, cd = brightness_chromaticity(x[idx], road[idx])
+        road_i = np.take(road, idx, axis=0)
+        a, cd = brightness_chromaticity(np.take(x, idx, axis=0), road_i)
         road_px = (np.abs(a / g - 1) <= tol) & (cd <= tol)
         if not road_px.any():
             return labels
         idx = idx[road_px]
         a2_only = fg.augmented_mask.reshape(-1)[idx] & ~fg.mog_mask.reshape(-1)[idx]
-        a_bg, cd_bg = brightness_chromaticity(self._background_image(fg.relearning).reshape(-1, 3)[idx], road[idx])
+        a_bg, cd_bg = brightness_chromaticity(np.take(self._background_image().reshape(-1, 3), idx, axis=0),
+                                              road_i[road_px])
         forgotten = (np.abs(a_bg / g - 1) > 2 * tol) | (cd_bg > 2 * tol)
         out = labels.copy()
         out.reshape(-1)[idx[a2_only | forgotten]] = PixelLabel.BACKGROUND
@@ -1211,7 +1213,7 @@ class CameraVehicleDetector:
             self._track(dt, np.zeros((0, 4)), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2, 2)), None)
             return []
         blobs = self._join_fragments(blobs, roi)
-        self.last_mask = blobs.label_image > 0
+        self._last_labels = blobs.label_image
         edges = blobs.boxes_px
         box = edges - 0.5  # continuous pixel coordinates (module docstring)
         bc = np.column_stack([(box[:, 0] + box[:, 2]) / 2, box[:, 3]])
