@@ -66,7 +66,10 @@ def test_round_trip_is_identical_message_by_message(tmp_path, storage):
     assert write_recording(path, records, storage=storage) == len(records)
     with Recording(path) as rec:
         back = list(rec.messages())
+        types = rec.topic_types()  # from the connections alone, before any counting pass
         topics = rec.topics()
+    assert types == {t: i.msgtype for t, i in topics.items()}
+    assert types["/laser_front/scan"] == "sensor_msgs/msg/LaserScan"
     assert len(back) == len(records)
     expected_counts: dict[str, int] = {}
     for r in records:

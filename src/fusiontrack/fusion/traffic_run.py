@@ -32,7 +32,7 @@ __all__ = ["evaluate_traffic", "run_traffic"]
 
 def _truth(path: Path) -> list[GroundTruth]:
     with Recording(path) as rec:
-        if "/ground_truth" not in rec.topics():
+        if "/ground_truth" not in rec.topic_types():
             return []
         return [g for g in rec.messages(["/ground_truth"]) if isinstance(g, GroundTruth)]
 

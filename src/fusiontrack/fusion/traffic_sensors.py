@@ -56,7 +56,7 @@ def traffic_branches(rec: Any, roads: Any, *, laser_params: Mapping[str, Any] | 
     ConfigError
         The calibration names a sensor the recording does not have (or has as the other kind).
     """
-    topics = rec.topics()
+    topics = rec.topic_types()
     lparams = dict(laser_params or {})
     chosen, pose_args = lparams.pop("lasers", None), {k: lparams.pop(k) for k in ("world_frame", "calibrated_suffix")
                                                      if k in lparams}
@@ -66,9 +66,9 @@ def traffic_branches(rec: Any, roads: Any, *, laser_params: Mapping[str, Any] | 
             raise ConfigError(f"{rec.paths[0]}: laser topic(s) {missing} not in the recording (topics: "
                               f"{sorted(topics)})")
     laser_topics = {rec.sensor_of(t): t for t, i in topics.items()
-                    if i.msgtype == _LASER and (chosen is None or t in chosen)}
+                    if i == _LASER and (chosen is None or t in chosen)}
     with_info = camera_names(rec)  # cameras the recording can pose itself (CameraInfo + tf)
-    with_images = sorted({rec.sensor_of(t) for t, i in topics.items() if i.msgtype in _IMAGES
+    with_images = sorted({rec.sensor_of(t) for t, i in topics.items() if i in _IMAGES
                           and not t.endswith(("/labels", "/depth"))})
     cameras = sorted(set(with_info) | set(with_images))
     calib = calibration or RoadCalibration()

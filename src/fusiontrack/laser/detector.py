@@ -298,7 +298,7 @@ def detector_for_recording(rec: Any, lasers: list[str], *, time_source: str = "h
     if background not in ("learn", "none"):
         raise ConfigError(f"background: expected 'learn' or 'none', got {background!r}")
     tree = TransformTree()
-    if "/tf_static" in rec.topics():
+    if "/tf_static" in rec.topic_types():
         for tf in rec.messages(["/tf_static"]):
             try:
                 tree.add_record(tf)

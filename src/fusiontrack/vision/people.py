@@ -204,9 +204,9 @@ def camera_from_recording(rec: Any, image_sensor: str, frame_id: str, *, info_to
     else of ``image_sensor``. Returns ``None`` (floor positions unavailable) when the recording has no
     CameraInfo for the camera or no transform from it to ``world_frame``.
     """
-    topics = rec.topics()
+    topics = rec.topic_types()
     infos = [info_topic] if info_topic else [t for t, i in topics.items()
-                                             if i.msgtype == "sensor_msgs/msg/CameraInfo"
+                                             if i == "sensor_msgs/msg/CameraInfo"
                                              and rec.sensor_of(t) == image_sensor]
     info: CameraInfo | None = None
     if infos and infos[0] in topics:
@@ -791,7 +791,7 @@ VIDEO_SUFFIXES = frozenset({".avi", ".mp4", ".mkv", ".mov", ".m4v", ".webm", ".m
 
 
 def _image_topic(rec: Any, camera_topic: str | None) -> str:
-    topics = rec.topics()
+    topics = rec.topic_types()
     if camera_topic is not None:
         if camera_topic not in topics:
             raise RecordingError(f"{rec.paths[0]}: no topic {camera_topic!r}; image topics: "
@@ -808,7 +808,7 @@ def _image_topic(rec: Any, camera_topic: str | None) -> str:
 
 
 def _image_topics(topics: dict[str, Any]) -> list[str]:
-    return [t for t, i in topics.items() if i.msgtype in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+    return [t for t, i in topics.items() if i in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
             and not t.endswith(("/labels", "/depth")) and "depth" not in t.split("/")[-1]]
 
 

@@ -1501,8 +1501,8 @@ class CameraVehicleDetector:
 
 
 def _image_topic(rec: Any, camera: str) -> str:
-    topics = rec.topics()
-    found = [t for t, i in topics.items() if i.msgtype in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+    topics = rec.topic_types()
+    found = [t for t, i in topics.items() if i in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
              and rec.sensor_of(t) == camera and not t.endswith(("/labels", "/depth"))]
     if not found:
         raise RecordingError(f"{rec.paths[0]}: no image topic of camera {camera!r}")
@@ -1510,8 +1510,8 @@ def _image_topic(rec: Any, camera: str) -> str:
 
 
 def _camera_names(rec: Any) -> list[str]:
-    topics = rec.topics()
-    return sorted({rec.sensor_of(t) for t, i in topics.items() if i.msgtype == "sensor_msgs/msg/CameraInfo"})
+    topics = rec.topic_types()
+    return sorted({rec.sensor_of(t) for t, i in topics.items() if i == "sensor_msgs/msg/CameraInfo"})
 
 
 def vehicle_detectors_for_recording(rec: Any, roads: Any, cameras: Sequence[str] | None = None,
