@@ -22,6 +22,7 @@ from fusiontrack.calibration import (
     points_in_regions,
     select_clusters,
 )
+from fusiontrack.calibration.bias_run import bias_settled
 from fusiontrack.geometry import PinholeCamera, make_transform
 from fusiontrack.types import LaserScan
 
@@ -242,6 +243,67 @@ def test_noisy_bias_error_after_convergence():
     err = np.abs(bias[100:] - 3.0)
     assert err.mean() <= 0.085
     assert abs(bias[100:].mean() - 3.0) <= 0.05
+
+
+def _biases_and_targets(est: HorizontalBiasEstimator, people: list[np.ndarray], n: int, box_noise_px: float = 0.0,
+                        rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Bias after each of ``n`` frames and each frame's target ``b + ē`` (A10), radians."""
+    bias, target = [], []
+    for k in range(n):
+        t = (10 + k) * 40_000_000
+        est.observe_scan(scan_of(people, t))
+        boxes = boxes_of(people)
+        if box_noise_px:
+            boxes = boxes + rng.normal(0.0, box_noise_px, (len(people), 1)) * [1, 0, 1, 0]
+        before = est.bias_rad
+        step = est.update(t, boxes)
+        assert step.n_used == 1
+        bias.append(step.bias_rad)
+        target.append(before + step.mean_residual_rad)
+    return np.array(bias), np.array(target)
+
+
+def test_stop_rule_stops_once_the_bias_has_caught_up_with_its_targets():
+    # Noise-free A10 at rho 0.1 from 0 towards 3 degrees: every target is 3 degrees, so the target test of
+    # bias_settled first holds when 3 (0.9)^n <= 0.1, n = 33; the span of the last 20 values,
+    # 3 (0.9)^(n-19) (1 - 0.9^19), first falls to 0.1 degree at n = 50.
+    tol = math.radians(0.1)
+    bias, target = _biases_and_targets(estimator(0.1), [person_at(200, 5.0)], 60)
+    np.testing.assert_allclose(target, B_TRUE, atol=math.radians(1e-3))
+    first = next(n for n in range(1, 61) if bias_settled(bias[:n], target[:n], 20, tol))
+    assert first == math.ceil(math.log(0.1 / 3.0) / math.log(0.9)) == 33
+    assert abs(math.degrees(bias[first - 1]) - 3.0) <= 0.1
+    span_first = next(n for n in range(20, 61) if np.ptp(bias[n - 20:n]) <= tol)
+    assert span_first == 50
+    assert not bias_settled(bias[:19], target[:19], 20, tol)  # fewer updates than the window
+    assert bias_settled(bias[:1], target[:1], 1, tol)  # one update spans nothing
+
+
+def test_stop_rule_on_noisy_boxes_stops_within_the_tolerance_of_the_true_bias():
+    # 0.3 degrees of blob jitter (A10 test 3): wherever the rule first holds, the bias is within the
+    # tolerance of the true 3 degrees; with 1.5 degrees of jitter the targets' standard error alone exceeds
+    # the tolerance, and a bias that happens to sit on their mean is not settled.
+    tol = math.radians(0.1)
+    for seed in range(5):
+        rng = np.random.default_rng(seed)
+        bias, target = _biases_and_targets(estimator(0.1), [person_at(200, 5.0)], 120,
+                                           FX * math.tan(math.radians(0.3)), rng)
+        first = next(n for n in range(20, 121) if bias_settled(bias[:n], target[:n], 20, tol))
+        assert abs(bias[first - 1] - B_TRUE) <= tol
+    rng = np.random.default_rng(0)
+    noisy = B_TRUE + rng.normal(0.0, math.radians(1.5), 20)
+    wander = np.full(20, noisy.mean())
+    wander[0] -= 1.5 * tol  # still moving: the span test does not hold
+    assert not bias_settled(wander, noisy, 20, tol)
+    assert bias_settled(wander, np.full(20, noisy.mean()), 20, tol)  # the same bias, targets in agreement
+
+
+@pytest.mark.parametrize(("kw", "name"), [({"window": 0}, "window"), ({"tol_rad": 0.0}, "tol_rad"),
+                                          ({"target_rad": [0.0]}, "target_rad")])
+def test_stop_rule_bad_arguments_name_the_argument(kw, name):
+    args = {"bias_rad": [0.0, 0.0], "target_rad": [0.0, 0.0], "window": 2, "tol_rad": 0.01, **kw}
+    with pytest.raises(ValueError, match=name):
+        bias_settled(**args)
 
 
 def test_capture_beyond_the_region_needs_widening():

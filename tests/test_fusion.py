@@ -380,6 +380,56 @@ def test_classifier_trained_after_the_contact_does_not_vote_in_its_check():
     assert laser.ids == [2, 1, 3]
 
 
+def test_after_an_exchange_the_pair_is_checked_again_by_the_same_voters_only():
+    """1 has a classifier at the contact and finds its track on the other person's box: exchange. 2 got its
+    first classifier between the contact and the exchange, while its track followed 1's person (row 1), so after
+    the exchange it would say "exchange back". The pair, still together, is checked again on the next images,
+    by 1 alone: the identities stay exchanged."""
+    laser = _FakeLaser()
+    bank = _FakeBank({1: 1, 2: 1, 3: 2}, {1})
+    t = 1_000_000_000
+    trk = _three_people(laser, bank, _Frames())
+    trk._check_identities(t, _step_states(trk, t))
+    assert laser.ids == [2, 1, 3]
+    assert trk.stats.exchanges == 1
+    bank.trained.add(2)
+    for k in range(1, 5):
+        tk = t + k * 40_000_000
+        trk._check_identities(tk, _step_states(trk, tk))
+        assert trk._checks[(1, 2)].voters == {1}
+    assert laser.ids == [2, 1, 3]
+    assert trk.stats.exchanges == 1
+    assert trk.stats.checks >= 4  # decided again ("keep") at each new image of the contact
+
+
+@pytest.mark.parametrize(("check_visible", "exchanged"), [(0.5, False), (0.0, True)])
+def test_check_ignores_a_box_mostly_off_the_image(check_visible, exchanged):
+    """Two people 0.7 m apart at the right edge of the image: the second one's box is half outside. Both
+    classifiers prefer the other box ("exchange"), but a box mostly off the image gives no evidence unless
+    ``check_visible`` allows it."""
+    from fusiontrack.types import TrackState
+    from fusiontrack.vision.patches import box_visibility
+
+    cam = PinholeCamera.from_pose([0.0, 0.0, 3.0], 0.0, np.radians(15), fx=400, fy=400, width=640, height=480)
+    laser, bank = _FakeLaser(), _FakeBank({1: 1, 2: 0}, {1, 2})
+    trk = FusionTracker(cam, _Frames(), FusionParams(check_frames=2, max_overlap=1.0, check_visible=check_visible))
+    trk.laser, trk.bank = laser, bank
+    where = np.array([[6.0, -4.4], [6.0, -5.1]])  # image right = world -y: the second at the edge (u ~ 640)
+    boxes = trk._boxes(where)
+    vis = box_visibility(boxes, (480, 640))
+    assert vis[0] > 0.99
+    assert 0.3 < vis[1] < 0.5  # the classifiers could still sample patches of the second
+    bank.row_u = np.r_[0.5 * (boxes[:, 0] + boxes[:, 2]), np.inf]
+    t = 1_000_000_000
+    for k in range(4):
+        tk = t + k * 40_000_000
+        ids = laser.ids[:2]
+        trk._check_identities(tk, [TrackState(tk, "laser", tid, xy, np.zeros(2)) for tid, xy in zip(ids, where,
+                                                                                                      strict=True)])
+    assert (trk.stats.exchanges >= 1) == exchanged
+    assert bool(trk.relabels) == exchanged
+
+
 # --------------------------------------------------------------------------------------------------
 # The camera's horizontal bias, learnt by the pipeline itself
 # --------------------------------------------------------------------------------------------------
@@ -466,6 +516,62 @@ def test_people_pipeline_learns_the_camera_bias_and_fuses_through_the_corrected_
            for name, cam in (("calibrated", bias.camera), ("corrected", bias.corrected_camera))}
     assert np.median(iou["corrected"]) > 0.5
     assert np.median(iou["corrected"]) > np.median(iou["calibrated"]) + 0.3
+
+
+def test_bias_pass_stops_by_its_rule_close_to_the_true_bias(crowd):
+    """The pipeline's bias pass stops at the first update at which its rule (:func:`bias_settled` over
+    ``BiasLearning``'s window, after ``min_updates``) holds, sooner than the span of the last 20 values alone
+    could for a 3-degree error (50 updates, noise-free), and within 0.15 degree of the simulator's 3 degrees."""
+    from fusiontrack.calibration.bias_run import bias_settled
+    from fusiontrack.fusion import BiasLearning
+
+    bias, lp = crowd["stats"].bias, BiasLearning()
+    h = bias.history
+    before = np.r_[0.0, h.bias_rad[:-1]]
+    target = before + (h.bias_rad - before) / lp.params.rho  # A10: b <- b + rho (b* - b)
+    up = h.n_used > 0
+    b, t = h.bias_rad[up], target[up]
+    stops = [n for n in range(lp.min_updates, len(b) + 1)
+             if bias_settled(b[:n], t[:n], lp.settle_updates, math.radians(lp.tol_deg))]
+    assert bias.settled
+    assert stops == [len(b)]
+    assert len(b) < 50
+    assert math.degrees(bias.bias_rad) == pytest.approx(YAW_ERROR_DEG, abs=0.15)
+
+
+def test_half_resolution_vision_path_boxes_land_where_full_resolution_ones_do(crowd):
+    """The bias's vision path at 320 x 240 (the 640 x 480 images shrunk 2x) gives boxes in full-image pixels:
+    against the simulator's boxes their horizontal centres are as unbiased as at full resolution (a box mapped
+    back half a small pixel off would be a full pixel off)."""
+    from fusiontrack.calibration.bias_run import VISION_WIDTH_PX, open_bias_inputs, vision_factor
+    from fusiontrack.types import LaserScan
+
+    offsets_ms = {k: -v / 1e6 for k, v in crowd["kw"]["clock_corrections_ns"].items()}
+    box_t = np.array([g.t_ns for g in crowd["boxes"]])
+    shift = {}
+    for width in (None, VISION_WIDTH_PX):
+        inputs = open_bias_inputs(crowd["path"], "camera_0", clock_offsets_ms=offsets_ms, vision_width_px=width)
+        du, frames = [], 0
+        for item in inputs:
+            if isinstance(item, LaserScan):
+                continue
+            frames += 1
+            if frames > 120:
+                break
+            g = crowd["boxes"][int(np.argmin(np.abs(box_t - item.t_ns)))]
+            tb = np.asarray(g.attributes["box_px"], float).reshape(-1, 4)
+            tb = tb[np.isfinite(tb).all(axis=1) & (np.asarray(g.attributes["visibility"], float) > 0.99)]
+            for box in item.boxes_px[item.usable]:
+                iou = _iou(np.broadcast_to(box, tb.shape), tb) if len(tb) else np.zeros(0)
+                if iou.size and iou.max() >= 0.7:
+                    du.append((box[0] + box[2] - tb[iou.argmax(), 0] - tb[iou.argmax(), 2]) / 2)
+        assert len(du) >= 100
+        shift[width] = (float(np.mean(du)), float(np.median(np.abs(du))))
+    assert vision_factor(640, VISION_WIDTH_PX) == 2
+    assert abs(shift[None][0]) <= 0.25
+    assert abs(shift[VISION_WIDTH_PX][0]) <= 0.4
+    assert abs(shift[VISION_WIDTH_PX][0] - shift[None][0]) <= 0.4
+    assert shift[VISION_WIDTH_PX][1] <= 1.0
 
 
 def test_bias_is_learnt_on_the_compressed_image_topic_the_pipeline_fuses(crowd, tmp_path):

@@ -325,3 +325,20 @@ def test_size_rule_params_checked():
         BlobTrackerParams(person_height_m=0.0)
     with pytest.raises(ValueError, match="differ"):
         fit_person_area(np.ones(3), np.ones(4))
+
+
+def test_components_match_scipys_connected_components_and_their_order():
+    """The tracker's own connected components (union-find) label every vertex as scipy does, components numbered
+    by their lowest vertex: the order in which the tracker handles association events, hence its ids."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from fusiontrack.vision.blob_tracker import _components
+
+    rng = np.random.default_rng(0)
+    for n in (1, 2, 5, 12, 30):
+        for density in (0.0, 0.05, 0.15, 0.5):
+            adj = rng.random((n, n)) < density
+            _, ref = connected_components(coo_matrix(adj.astype(np.float64)), directed=False)
+            np.testing.assert_array_equal(_components(adj), ref)
+    assert _components(np.zeros((0, 0), bool)).shape == (0,)

@@ -62,6 +62,7 @@ from ..geometry import PinholeCamera
 from ..tracking.tracker import LaserPeopleTracker, TrackerParams, run_tracker
 from ..types import Detection, Event, Image, Situation, TrackState
 from ..vision.appearance import AppearanceBank, AppearanceParams
+from ..vision.patches import box_visibility
 
 __all__ = ["BiasLearning", "CameraBias", "FrameSource", "FusionParams", "FusionStats", "FusionTracker", "Relabel",
            "learn_camera_bias", "relabel_states", "track_fused"]
@@ -118,10 +119,15 @@ class FusionParams:
     check_frames : int
         Clear camera images a check needs before it decides [RECON].
     check_s : float
-        A check still undecided this long after the pair was last within ``d_train_m`` is dropped [RECON].
+        A pair's check (decided or not) is dropped this long after the pair was last within ``d_train_m``
+        [RECON].
     max_overlap : float
         An image is clear for a check when neither box of the pair has more than this fraction of its area
         inside another target's box (occlusion) [RECON].
+    check_visible : float
+        ... and at least this fraction of each box of the pair is inside the image [RECON: a box mostly off the
+        image shows its classifier a sliver of the person; ``benchmarks/fusion.py``'s wrong exchanges were made
+        on such slivers].
     height_m, width_ratio : float
         B11's person box (``H_p``, ``r_w``).
     max_frame_dt_s : float
@@ -143,6 +149,7 @@ class FusionParams:
     check_frames: int = 3
     check_s: float = 4.0
     max_overlap: float = 0.3
+    check_visible: float = 0.5
     height_m: float = 1.70
     width_ratio: float = 0.40
     max_frame_dt_s: float = 0.05
@@ -153,6 +160,8 @@ class FusionParams:
             raise ConfigError(f"FusionParams.check_frames: expected an integer >= 1, got {self.check_frames!r}")
         if not 0 < self.max_overlap <= 1:
             raise ConfigError(f"FusionParams.max_overlap: expected a fraction in (0, 1], got {self.max_overlap!r}")
+        if not (isinstance(self.check_visible, int | float) and 0 <= self.check_visible <= 1):
+            raise ConfigError(f"FusionParams.check_visible: expected a fraction in [0, 1], got {self.check_visible!r}")
         for name in ("d_train_m", "train_interval_s", "score_beta", "group_m", "split_margin", "height_m",
                      "width_ratio", "max_frame_dt_s", "d_contact_m", "check_margin", "check_s"):
             v = getattr(self, name)
@@ -180,7 +189,9 @@ class BiasLearning:
     min_updates : int
         Updates (frames whose objects moved the bias) before the bias may be called settled [RECON].
     settle_updates : int
-        It has settled when its last ``settle_updates`` values span at most ``tol_deg`` [RECON].
+        Over its last ``settle_updates`` values it has settled when they span at most ``tol_deg``, or when it is
+        within ``tol_deg`` of the mean of those updates' targets, two standard errors counted against it
+        (:func:`~fusiontrack.calibration.bias_run.bias_settled`) [RECON].
     tol_deg : float
         See ``settle_updates`` (0.1 degrees: about the wander of the settled bias, ``benchmarks/bias.py``).
     max_s : float
@@ -318,6 +329,8 @@ class _Check:
     evidence: float = 0.0  # summed per-classifier evidence for the current identities
     n: int = 0
     image_ns: int = -1  # the last image that gave evidence
+    decided: bool = False  # decided since the pair's last contact: waits for the next contact
+    exchanged: bool = False  # an exchange was decided: the pair's later checks keep these voters
 
 
 @dataclass(frozen=True, slots=True)
@@ -543,13 +556,17 @@ class FusionTracker:
         """Open, feed and decide the identity checks of pairs of tracks that came into contact.
 
         A pair is opened when its tracks come within ``d_contact_m`` or merge or split together. On every camera
-        image on which both are walking targets (not merged) with clear boxes (``max_overlap``), each of the two
-        classifiers that was trained when the check opened (its voters; a check without any is reopened at the
-        next contact) gives its evidence, its confidence on its own track's box minus that on the other box.
-        After ``check_frames`` images, a mean evidence beyond ``± check_margin`` keeps the identities or
-        exchanges them (:meth:`_exchange`). A track is exchanged at most once per step (a later check of it waits
-        for the next image: its evidence was reset and this step's boxes carry the old ids); the states of this
-        step are returned with the exchanges applied one after the other, as the laser tracker's ids were.
+        image on which both are walking targets (not merged) with clear boxes (``max_overlap``) mostly inside the
+        image (``check_visible``), each of the two classifiers that was trained when the check opened (its
+        voters; a check without any is reopened at the next contact) gives its evidence, its confidence on its
+        own track's box minus that on the other box. After ``check_frames`` images, a mean evidence beyond
+        ``± check_margin`` keeps the identities or exchanges them (:meth:`_exchange`); the decided check waits for
+        the pair's next contact and is then run again (until the pair has been apart for ``check_s``): after an
+        exchange by the same voters (a classifier trained before the exchange decision may have learnt the
+        other person), else by every trained classifier of the pair. A track is exchanged at most once per step
+        (a later check of it waits for the next image: its evidence was reset and this step's boxes carry the old
+        ids); the states of this step are returned with the exchanges applied one after the other, as the laser
+        tracker's ids were.
         """
         p = self.params
         ids = np.array([st.track_id for st in states], np.int64)
@@ -574,6 +591,12 @@ class FusionTracker:
                 voters = frozenset(tid for tid in pair if self.bank.is_trained(tid))
                 checks[pair] = _Check(t_ns, dist, t_ns, voters, split or (c is not None and c.split_seen))
                 continue
+            if c.decided:  # a new contact of a decided pair: checked again. After an exchange, by the same
+                # voters: a classifier trained between the contact and the exchange (e.g. of a track born beside
+                # the other) learnt the other person under its id; after a "keep", by every trained classifier.
+                voters = c.voters if c.exchanged else frozenset(tid for tid in pair if self.bank.is_trained(tid))
+                checks[pair] = _Check(t_ns, dist, c.near_ns, voters, split, exchanged=c.exchanged)
+                continue
             if split:  # an exchange, if any, most likely happened at the (last) split
                 c.swap_from_ns, c.split_seen = t_ns, True
             elif dist < c.closest_m and not c.split_seen:
@@ -594,14 +617,17 @@ class FusionTracker:
         if t_img is None:
             return states
         walking = np.array([st.situation != _MERGED for st in states])
-        todo = [pair for pair, c in checks.items() if c.image_ns != t_img and walking[row[pair[0]]]
-                and walking[row[pair[1]]] and any(self.bank.is_trained(tid) for tid in c.voters)]
+        todo = [pair for pair, c in checks.items() if not c.decided and c.image_ns != t_img
+                and walking[row[pair[0]]] and walking[row[pair[1]]]
+                and any(self.bank.is_trained(tid) for tid in c.voters)]
         if not todo:
             return states
         t0 = time.perf_counter()
         boxes = self._boxes(pos)
         ok = np.isfinite(boxes).all(axis=1)
         occluded = _occlusion(boxes, ok)  # (n,) largest fraction of each box inside another box
+        if p.check_visible > 0 and self.camera is not None:  # and mostly inside the image
+            ok &= box_visibility(boxes, (self.camera.height, self.camera.width)) >= p.check_visible
         todo = [pair for pair in todo if ok[row[pair[0]]] and ok[row[pair[1]]]
                 and occluded[row[pair[0]]] <= p.max_overlap and occluded[row[pair[1]]] <= p.max_overlap]
         img = self._image(t_ns) if todo else None
@@ -626,9 +652,10 @@ class FusionTracker:
                 c.image_ns = t_img
                 mean = c.evidence / c.n
                 if c.n >= p.check_frames and abs(mean) >= p.check_margin:
-                    del checks[pair]
+                    c.decided = True
                     self.stats.checks += 1
                     if mean < 0 and self._exchange(pair[0], pair[1], c.swap_from_ns, t_ns, mean):
+                        c.exchanged = True
                         exchanged.append(pair)
                         busy.update(pair)
         self.stats.camera_s += time.perf_counter() - t0
@@ -732,12 +759,12 @@ class FusionTracker:
 
 def _image_topic(rec: Any, camera_topic: str | None) -> str | None:
     """The image topic to fuse: ``camera_topic``, else the recording's only camera image topic, else None."""
-    topics = rec.topics()
+    topics = rec.topic_types()
     if camera_topic is not None:
         if camera_topic not in topics:
             raise RecordingError(f"{rec.paths[0]}: no topic {camera_topic!r}")
         return camera_topic
-    found = [t for t, i in topics.items() if i.msgtype in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+    found = [t for t, i in topics.items() if i in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
              and not t.endswith(("/labels", "/depth")) and "depth" not in t.split("/")[-1]]
     if len(found) > 1:
         raise ConfigError(f"{rec.paths[0]}: several image topics ({', '.join(found)}); choose one with camera_topic")
@@ -747,12 +774,20 @@ def _image_topic(rec: Any, camera_topic: str | None) -> str | None:
 def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCamera | None = None,
                       lasers: Mapping[str, Any] | None = None, learning: BiasLearning | None = None,
                       clock_corrections_ns: Mapping[str, int] | None = None, world_frame: str = "world",
-                      image_topic: str | None = None) -> CameraBias:
+                      image_topic: str | None = None, vision_width_px: int | None = 320) -> CameraBias:
     """Learn a camera's horizontal bias against the lasers over the beginning of a recording (seed 000, A0–A10).
 
     Like :func:`~fusiontrack.calibration.bias_run.bias_from_recording`, but stops as soon as the bias has
-    settled (:class:`BiasLearning`), so that only the first seconds of the camera go through seed 000's vision
-    path.
+    settled, so that only the first seconds of the camera go through seed 000's vision path. Settled: at least
+    ``learning.min_updates`` updates, and over the last ``learning.settle_updates`` of them
+    :func:`~fusiontrack.calibration.bias_run.bias_settled` with ``tol_deg``: the bias spans at most
+    ``tol_deg``, or it is within ``tol_deg`` of the mean of those updates' targets ``b + ē`` (two standard
+    errors of the mean counted against it). The second test stops a bias that has caught up with its
+    measurements but is still creeping towards them (a 3-degree error at ``rho = 0.1``: after the 40
+    ``min_updates`` instead of 50 or more). The pass's foreground is A1 and A3 without A2's stopped-object mask
+    (``ForegroundParams(stopped=None)``): A2 starts no stop in its first ``stopped_warmup`` (100) frames, most of
+    a pass, and until then leaves the mask as it is at a third of the foreground's cost; in a longer pass a
+    person standing still for several seconds fades into MOG2's background and stops feeding the bias.
 
     Parameters
     ----------
@@ -772,6 +807,10 @@ def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCame
     image_topic : str, optional
         The camera's image topic (default: its first one that is not a label or depth image,
         :func:`~fusiontrack.calibration.bias_run.open_bias_inputs`); :func:`track_fused` passes the one it fuses.
+    vision_width_px : int or None
+        The vision path (A1–A5) runs on the images shrunk by an integer factor to about this width (320:
+        seed 000's 320 x 240, a quarter of the pixels of 640 x 480; :func:`~fusiontrack.calibration.bias_run.
+        vision_factor`); None for full resolution.
 
     Returns
     -------
@@ -784,33 +823,37 @@ def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCame
     RecordingError
         The recording lacks the camera's images or CameraInfo, the lasers or their poses.
     """
-    from ..calibration.bias_run import open_bias_inputs
+    from ..calibration.bias_run import bias_settled, open_bias_inputs
     from ..types import LaserScan
+    from ..vision.foreground import ForegroundParams
 
     lp = learning or BiasLearning()
     offsets_ms = {k: -v / 1e6 for k, v in (clock_corrections_ns or {}).items()}
     inputs = open_bias_inputs(path, camera_name, None if lasers is None else list(lasers),
                               clock_offsets_ms=offsets_ms, world_frame=world_frame,
                               cam2world=None if camera is None else camera.cam2world, laser2world=lasers,
-                              image_topic=image_topic)
+                              image_topic=image_topic, vision_width_px=vision_width_px,
+                              foreground=ForegroundParams(stopped=None))
     if camera is not None:
         inputs = dataclasses.replace(inputs, camera=camera)
     est = inputs.estimator(lp.params)
     tic = time.perf_counter()
     tol = np.radians(lp.tol_deg)
     learnt: list[float] = []
+    targets: list[float] = []  # b + ē of every update: where it pulled the bias to
     first_ns: int | None = None
     settled = False
     for item in inputs:
         if isinstance(item, LaserScan):
             est.observe_scan(item)
             continue
+        before = est.bias_rad
         step = item.update(est)
         first_ns = step.t_ns if first_ns is None else first_ns
         if step.n_used:
             learnt.append(step.bias_rad)
-            recent = learnt[-lp.settle_updates:]
-            if len(learnt) >= max(lp.min_updates, lp.settle_updates) and max(recent) - min(recent) <= tol:
+            targets.append(before + step.mean_residual_rad)
+            if len(learnt) >= lp.min_updates and bias_settled(learnt, targets, lp.settle_updates, tol):
                 settled = True
                 break
         if step.t_ns - first_ns >= lp.max_s * 1e9:
@@ -896,8 +939,8 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
     corrections = dict(clock_corrections_ns or {})
     first_path = path if isinstance(path, str | Path) else next(iter(path), None)
     with Recording(path) as rec, Recording(path) as cam_rec:
-        info = rec.topics()
-        lasers = [t for t, i in info.items() if i.msgtype == LASERSCAN] if topics is None else list(topics)
+        info = rec.topic_types()
+        lasers = [t for t, i in info.items() if i == LASERSCAN] if topics is None else list(topics)
         if not lasers:
             raise RecordingError(f"{path}: no sensor_msgs/LaserScan topic to track")
         image_topic = _image_topic(rec, camera_topic)

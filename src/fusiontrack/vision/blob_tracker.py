@@ -47,8 +47,6 @@ from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.stats import theilslopes
 
 from ..geometry import PinholeCamera
@@ -320,6 +318,27 @@ def _overlap_fraction(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return inter / np.maximum(np.minimum(area(a)[:, None], area(b)[None, :]), 1e-9)
 
 
+def _components(adj: np.ndarray) -> np.ndarray:
+    """Connected components of a small undirected graph given as a square bool matrix, ``(n,)`` int64 labels
+    numbered in the order of each component's lowest vertex (as ``scipy.sparse.csgraph.connected_components``
+    numbers them). Union-find over the edges: the graphs here have a few dozen vertices, for which building
+    sparse matrices costs far more than the search."""
+    n = adj.shape[0]
+    parent = list(range(n))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for i, j in zip(*np.nonzero(np.triu(adj | adj.T, 1)), strict=True):
+        ri, rj = root(int(i)), root(int(j))
+        if ri != rj:
+            parent[max(ri, rj)] = min(ri, rj)
+    return np.unique([root(i) for i in range(n)], return_inverse=True)[1].astype(np.int64).reshape(n)
+
+
 def _bc_cost(p: np.ndarray | None, q: np.ndarray | None) -> float:
     """``1 − BC(p, q)`` (X4), 0.5 when either histogram is unknown."""
     if p is None or q is None:
@@ -419,12 +438,9 @@ class BlobTracker:
             dist = np.linalg.norm(np.array([n.x[:2] for n in live])[:, None] - cents[None], axis=2)
             A = (_overlap_fraction(pred, boxes) >= p.tau_ov) | (dist <= p.d_a_px)
         n_n = len(live)
-        adj = coo_matrix((np.ones(int(A.sum())), np.nonzero(A)), shape=(n_n, n_b)).tocsr()
-        full = coo_matrix(
-            (np.ones(2 * adj.nnz), (np.r_[adj.nonzero()[0], n_n + adj.nonzero()[1]],
-                                    np.r_[n_n + adj.nonzero()[1], adj.nonzero()[0]])),
-            shape=(n_n + n_b, n_n + n_b))
-        _, comp = connected_components(full, directed=False)
+        full = np.zeros((n_n + n_b, n_n + n_b), bool)  # nodes, then blobs
+        full[:n_n, n_n:] = A
+        comp = _components(full)
         appeared: list[int] = []
         for c in np.unique(comp):
             nodes = [live[i] for i in np.flatnonzero(comp[:n_n] == c)]
@@ -550,8 +566,7 @@ class BlobTracker:
         """New blobs; those within ``d_frag`` of each other are one new object born in pieces (a pending split)."""
         if not js:
             return
-        gaps = box_gaps(boxes[js], boxes[js]) <= self.params.d_frag_px
-        _, comp = connected_components(coo_matrix(gaps.astype(np.float64)), directed=False)
+        comp = _components(box_gaps(boxes[js], boxes[js]) <= self.params.d_frag_px)
         for c in np.unique(comp):
             group = [js[k] for k in np.flatnonzero(comp == c)]
             bx = boxes[group]
@@ -597,7 +612,7 @@ class BlobTracker:
         for i in range(k):
             for j in range(i + 1, k):
                 same[i, j] = same[j, i] = self._coherent(nodes[i], nodes[j])
-        _, comp = connected_components(coo_matrix(same.astype(np.float64)), directed=False)
+        comp = _components(same)
         return [[nodes[i] for i in np.flatnonzero(comp == c)] for c in np.unique(comp)]
 
     def _decide_splits(self) -> None:
@@ -749,7 +764,7 @@ class BlobTracker:
 
     def _union_box(self, nodes: list[_Node]) -> np.ndarray:
         boxes = np.array([n.history[-1][2] if n.missed == 0 else n.box() for n in nodes])
-        return np.r_[boxes[:, :2].min(axis=0), boxes[:, 2:].max(axis=0)]
+        return np.concatenate([boxes[:, :2].min(axis=0), boxes[:, 2:].max(axis=0)])
 
     def _is_crowd(self, box: np.ndarray) -> bool:
         """A5 §4's ``n̂ >= group_n_hat`` (False while ``A_p`` is unknown or the rule is off)."""
