@@ -62,6 +62,7 @@ from ..geometry import PinholeCamera
 from ..tracking.tracker import LaserPeopleTracker, TrackerParams, run_tracker
 from ..types import Detection, Event, Image, Situation, TrackState
 from ..vision.appearance import AppearanceBank, AppearanceParams
+from ..vision.cvthreads import opencv_threads
 from ..vision.patches import box_visibility
 
 __all__ = ["BiasLearning", "CameraBias", "FrameSource", "FusionParams", "FusionStats", "FusionTracker", "Relabel",
@@ -938,7 +939,7 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         raise ConfigError(f"adaptive_bias: expected a bool, BiasLearning or BiasParams, got {adaptive_bias!r}")
     corrections = dict(clock_corrections_ns or {})
     first_path = path if isinstance(path, str | Path) else next(iter(path), None)
-    with Recording(path) as rec, Recording(path) as cam_rec:
+    with Recording(path) as rec, Recording(path) as cam_rec, opencv_threads(1):
         info = rec.topic_types()
         lasers = [t for t, i in info.items() if i == LASERSCAN] if topics is None else list(topics)
         if not lasers:
@@ -958,7 +959,7 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         if image_topic is None or camera is None:
             camera, cam_sensor = None, ""
         p = params or FusionParams()
-        total = sum(info[t].count for t in lasers if t in info)
+        total = sum(c.msgcount for c in rec.connections if c.topic in lasers)  # from the index or metadata
         detector, poses = detector_for_recording(rec, lasers, time_source=time_source, world_frame=world_frame,
                                                  background="learn", detector_params=detector_params)
         bias = None
