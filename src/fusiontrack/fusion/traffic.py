@@ -25,8 +25,7 @@ import logging
 import math
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -38,6 +37,7 @@ from ..io.recording import Recording
 from ..tracking.baseline import CVKalmanTracker
 from ..tracking.vehicle_pf import FusedObject, VehicleModeTracker, VehiclePfParams
 from ..types import Detection, Event, Image, LaserScan, TrackState
+from ..vision.cvthreads import opencv_threads
 from .objects import DetectionBuffer, ObjectFusionParams, fuse_objects, sensor_kind
 from .traffic_workers import CameraJob, CameraWorkers, default_workers
 
@@ -253,19 +253,6 @@ class _KalmanVariant:
         return states
 
 
-@contextmanager
-def _opencv_threads(n: int) -> Iterator[None]:
-    """OpenCV's thread count set to ``n`` for the block, restored after it."""
-    import cv2
-
-    before = cv2.getNumThreads()
-    cv2.setNumThreads(n)
-    try:
-        yield
-    finally:
-        cv2.setNumThreads(before)
-
-
 def _select(per_sensor: Mapping[str, list[Detection]], kinds: tuple[str, ...]) -> dict[str, list[Detection]]:
     return {s: d for s, d in per_sensor.items() if d and sensor_kind(d[0]) in kinds}
 
@@ -367,7 +354,7 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
     buffer = DetectionBuffer(max(p.fusion.max_age_s, frame_s))
     wall_start, cpu_start = time.perf_counter(), time.process_time()
     worker_cpu, n_workers = 0.0, 0
-    with Recording(path) as rec, _opencv_threads(1):
+    with Recording(path) as rec, opencv_threads(1):
         cam_params = VehicleDetectorParams(**dict(p.camera)) if p.camera else None
         laser, laser_topics, cams = traffic_branches(rec, roads, laser_params=p.laser, camera_params=cam_params,
                                                      time_source=time_source, calibration=calibration)

@@ -64,6 +64,7 @@ from ..tracking import kalman
 from ..tracking.association import hungarian
 from ..types import CameraInfo, Detection, Event, GroundTruth, Image, Situation, TrackState
 from .blobs import BlobParams, Blobs, blob_contours, blob_histograms, box_histograms, extract_blobs
+from .cvthreads import opencv_threads
 from .foreground import ForegroundModel, ForegroundParams, ForegroundResult
 
 __all__ = [
@@ -963,8 +964,9 @@ def track_camera(
             det = det.scaled(detection_scale)
     frames = _Frames(source, camera_topic, camera, time_source)
     try:
-        return _run(frames, det, params, min_score, foreground, blob_params, complete_height_m, colour, overlay,
-                    max_frames, on_frame, progress)
+        with opencv_threads(1):  # small frames: OpenCV's worker threads cost more CPU than they save
+            return _run(frames, det, params, min_score, foreground, blob_params, complete_height_m, colour,
+                        overlay, max_frames, on_frame, progress)
     finally:
         frames.close()
 
