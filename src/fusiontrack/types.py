@@ -212,6 +212,23 @@ class Image:
         dtype = np.uint16 if self.encoding == "mono16" else np.uint8
         _set(self, "pixels", _frozen_array(self.pixels, dtype, shape, f"Image.pixels ({self.encoding})"))
 
+    @staticmethod
+    def trusted(t_ns: int, sensor: str, frame_id: str, pixels: np.ndarray, encoding: str = "bgr8") -> Image:
+        """An image from pixels a reader already holds in the documented form, without checks or a copy (the
+        recording reader's hot path; ``Image(...)`` is the checked constructor).
+
+        The caller guarantees: ``t_ns`` an int, ``encoding`` one of the four, ``pixels`` of its dtype and shape
+        (native byte order). The array is made read-only here, not copied: it may be a view of the message's
+        bytes."""
+        im = object.__new__(Image)
+        pixels.setflags(write=False)
+        _set(im, "t_ns", t_ns)
+        _set(im, "sensor", sensor)
+        _set(im, "frame_id", frame_id)
+        _set(im, "pixels", pixels)
+        _set(im, "encoding", encoding)
+        return im
+
     @property
     def height(self) -> int:
         return int(self.pixels.shape[0])

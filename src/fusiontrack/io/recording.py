@@ -31,6 +31,7 @@ from .ros import (
     FROM_ROS,
     HEADERLESS,
     build_typestore,
+    image_from_cdr_bytes,
     laserscan_from_cdr_bytes,
     laserscan_from_ros1_bytes,
     parse_definitions,
@@ -45,6 +46,7 @@ SENSOR_MAP_KEY = "fusiontrack.sensors"
 
 TimeSource = Literal["header", "log"]
 LASERSCAN = "sensor_msgs/msg/LaserScan"
+IMAGE = "sensor_msgs/msg/Image"
 
 
 @dataclass(frozen=True, slots=True)
@@ -353,11 +355,14 @@ class Recording:
             reader = owners[id(conn)]
             sensor = self.sensor_of(conn.topic)
             try:
+                fast: Message | None = None
                 if conn.msgtype == LASERSCAN:
                     fast = (laserscan_from_cdr_bytes if reader.is2 else laserscan_from_ros1_bytes)(raw, sensor)
-                    if fast is not None:
-                        yield fast if time_source == "header" and fast.t_ns else with_time(fast, log_ns)
-                        continue
+                elif conn.msgtype == IMAGE and reader.is2:
+                    fast = image_from_cdr_bytes(raw, sensor)  # the pixels a view of the raw bytes
+                if fast is not None:
+                    yield fast if time_source == "header" and fast.t_ns else with_time(fast, log_ns)
+                    continue
                 msg = reader.deserialize(raw, conn.msgtype)
                 t_ns = log_ns
                 if time_source == "header" and conn.msgtype not in HEADERLESS:

@@ -475,6 +475,49 @@ def laserscan_from_ros1_bytes(buf: bytes, sensor: str) -> LaserScan | None:
         return None
 
 
+_IMAGE_WIRE = {"rgb8": (np.uint8, 3, "rgb8"), "bgr8": (np.uint8, 3, "bgr8"), "mono8": (np.uint8, 1, "mono8"),
+               "8uc1": (np.uint8, 1, "mono8"), "mono16": (np.uint16, 1, "mono16")}
+
+
+def image_from_cdr_bytes(buf: bytes, sensor: str) -> Image | None:
+    """Decode a ROS 2 (CDR) sensor_msgs/msg/Image of a colour, grey or 16-bit encoding, its pixels a view of
+    ``buf`` (no copy when the rows are not padded and the byte order is the machine's), or return None (other
+    encodings, depth, a buffer it does not understand: the caller takes the general path)."""
+    try:
+        order = "<" if buf[1] == 1 else ">"
+        body = memoryview(buf)[4:]  # CDR aligns relative to the end of the 4-byte encapsulation header
+        sec, nsec, n_frame = struct.unpack_from(order + "iII", body, 0)
+        pos = 12 + n_frame
+        frame_id = bytes(body[12:pos]).rstrip(b"\x00").decode()
+        pos += -pos % 4
+        height, width, n_enc = struct.unpack_from(order + "III", body, pos)
+        pos += 12
+        spec = _IMAGE_WIRE.get(bytes(body[pos:pos + n_enc]).rstrip(b"\x00").decode().lower())
+        pos += n_enc
+        big = body[pos]
+        pos += 1
+        pos += -pos % 4
+        step, n_data = struct.unpack_from(order + "II", body, pos)
+        pos += 8
+        if spec is None or height == 0 or width == 0:
+            return None
+        dtype, channels, encoding = spec
+        wire = np.dtype(dtype).newbyteorder(">" if big else "<")
+        row = width * channels * wire.itemsize
+        if step < row or n_data < step * height or pos + n_data > len(body):
+            return None
+        rows = np.frombuffer(buf, np.uint8, step * height, 4 + pos).reshape(height, step)
+        if step != row:
+            rows = np.ascontiguousarray(rows[:, :row])
+        pixels = rows.view(wire)
+        if not wire.isnative:
+            pixels = pixels.astype(wire.newbyteorder("="))
+        shape = (height, width, channels) if channels > 1 else (height, width)
+        return Image.trusted(sec * NS + nsec, sensor, frame_id, pixels.reshape(shape), encoding)
+    except (struct.error, UnicodeDecodeError, ValueError, IndexError):
+        return None
+
+
 def laserscan_from_cdr_bytes(buf: bytes, sensor: str) -> LaserScan | None:
     """Decode a ROS 2 (CDR) sensor_msgs/msg/LaserScan or return None."""
     try:
