@@ -213,9 +213,11 @@ def test_cli_track_traffic_and_events_rerun(road, tmp_path):
         return subprocess.run([sys.executable, "-m", "fusiontrack", *args], capture_output=True, text=True,
                               timeout=300)
 
-    r = cli("track", str(path), "--pipeline", "traffic", "-o", str(out), "--no-video")
+    r = cli("track", str(path), "--pipeline", "traffic", "-o", str(out), "--no-video", "--workers", "1")
     assert r.returncode == 0, r.stderr
     summary = json.loads((out / "summary.json").read_text())
+    assert summary["workers"] == 1
+    assert summary["x_real_time"] > 0
     assert summary["metrics"]["fusion_pf"]["MOTA"] > 0.5
     assert summary["incidents"]["road_leaving"]["hits"] == 1
     for name in ("tracks.csv", "tracks.jsonl", "events.jsonl", "report.html"):
@@ -224,9 +226,10 @@ def test_cli_track_traffic_and_events_rerun(road, tmp_path):
              "--truth", str(path))
     assert r2.returncode == 0, r2.stderr
     assert "road_leaving" in r2.stdout
-    bad = cli("track", str(path), "--pipeline", "people-laser", "--compare", "-o", str(tmp_path / "x"))
+    bad = cli("track", str(path), "--pipeline", "people-laser", "--compare", "--workers", "2", "-o",
+              str(tmp_path / "x"))
     assert bad.returncode == 2
-    assert "only for --pipeline traffic" in bad.stderr
+    assert "--compare, --workers: only for --pipeline traffic" in bad.stderr
     bad = cli("track", str(path), "--pipeline", "traffic", "--tracker", "kalman", "-o", str(tmp_path / "y"))
     assert bad.returncode == 2
     assert "--tracker: only for the laser people pipelines" in bad.stderr

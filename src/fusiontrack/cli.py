@@ -377,6 +377,9 @@ def track(
                                                      "calibrate-road` (or [traffic] calibration = FILE in the "
                                                      "pipeline file); the sensors it names are posed by it instead "
                                                      "of the recording's /tf_static.")] = None,
+    workers: Annotated[int | None, typer.Option(help="traffic: camera branches in this many worker processes "
+                                                "beside the main one (0: none; default: one per camera within "
+                                                "the cores, minus one for the main process). Same tracks.")] = None,
 ) -> None:
     """Track people in a recording; writes tracks.csv, tracks.jsonl (states + events) and tracks.mp4.
 
@@ -392,7 +395,8 @@ def track(
     if time_source not in ("header", "log"):
         raise ConfigError(f"--time: expected 'header' or 'log', got {time_source!r}")
     traffic_only = {"--geometry": geometry is not None, "--rules": rules is not None, "--compare": compare,
-                    "--calibration": calibration is not None, "--scene": scene != "rules"}
+                    "--calibration": calibration is not None, "--scene": scene != "rules",
+                    "--workers": workers is not None}
     if pipeline != "traffic" and any(traffic_only.values()):
         given = ", ".join(k for k, v in traffic_only.items() if v)
         raise ConfigError(f"{given}: only for --pipeline traffic (got --pipeline {pipeline})")
@@ -416,7 +420,8 @@ def track(
         return
     if pipeline == "traffic":
         _track_traffic(recordings, output, config=config, geometry=geometry, rules=rules, compare=compare,
-                       video=video, time_source=time_source, seed=seed, calibration=calibration, scene=scene)
+                       video=video, time_source=time_source, seed=seed, calibration=calibration, scene=scene,
+                       workers=workers)
         return
     seed = 0 if seed is None else seed
     if pipeline == "people-camera":
@@ -539,7 +544,7 @@ def _track_wearable(sources: list[Path], output: Path, *, config: Path | None, s
 
 def _track_traffic(sources: list[Path], output: Path, *, config: Path | None, geometry: Path | None,
                    rules: Path | None, compare: bool, video: bool, time_source: str, seed: int | None,
-                   calibration: Path | None, scene: str) -> None:
+                   calibration: Path | None, scene: str, workers: int | None = None) -> None:
     """``track --pipeline traffic``: seed 003's pipeline; writes tracks, events, summary and report.html."""
     from .fusion.traffic import TrafficParams
     from .fusion.traffic_run import run_traffic
@@ -558,13 +563,18 @@ def _track_traffic(sources: list[Path], output: Path, *, config: Path | None, ge
         from dataclasses import replace
 
         params = replace(params, tracker=replace(params.tracker, seed=seed))
+    if workers is not None:  # --workers wins over the pipeline file's [traffic] workers
+        from dataclasses import replace
+
+        params = replace(params, workers=workers)
     with progress() as bar:
         task = bar.add_task("tracking (traffic)", total=1.0)
         summary = run_traffic(sources[0], output, geometry=geometry, rules=rules, params=params, compare=compare,
                               video=video, time_source=time_source, progress=lambda f: bar.update(task, completed=f),
                               calibration=calibration, scene_engine=scene)
     console.print(f"{summary['tracks']} tracks over {summary['duration_s']:.1f} s at {summary['x_real_time']:.1f}x "
-                  f"real time; events {summary['events'] or 'none'} -> {output}")
+                  f"real time ({summary['workers']} camera worker(s)); events {summary['events'] or 'none'} -> "
+                  f"{output}")
     if "metrics" in summary:
         table = Table(title="vehicles against ground truth (match within 2 m)")
         for col in ("variant", "MOTA", "IDF1", "HOTA", "IDSW", "FP", "FN"):

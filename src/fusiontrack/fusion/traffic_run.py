@@ -104,7 +104,8 @@ def run_traffic(recording: str | Path, output: str | Path, *, geometry: Any = No
         "fusion_instants": result.n_ticks, "fusion_instants_per_sensor": result.fused_ticks,
         "detections_per_sensor": result.detections,
         "messages_skipped": result.errors, "time_s": result.timings_s, "cpu_s": result.cpu_s,
-        "x_real_time": result.speed_x_real_time(), "x_real_time_cpu": result.speed_x_real_time(cpu=True),
+        "x_real_time": result.real_time_factor(), "x_real_time_cpu": result.cpu_real_time_factor(),
+        "workers": result.workers,
         "tracks": len({s.track_id for s in states}), "scene_engine": scene_engine,
         "events": _count_kinds(result.scene_events),
     }
