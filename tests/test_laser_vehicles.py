@@ -122,6 +122,37 @@ def test_all_clusters_at_once_equal_one_at_a_time() -> None:
         np.testing.assert_allclose(together.hi_m[i], alone.hi_m[0], atol=1e-9)
 
 
+@pytest.mark.parametrize("heading_deg", [-0.3, 0.2, 89.8, 90.4])
+def test_headings_beside_the_grid_ends_wrap_into_0_90_with_consistent_sides(heading_deg: float) -> None:
+    # The refinement around 0° or 89° may step past the period; the box is then evaluated at the wrapped angle.
+    h = math.radians(heading_deg)
+    pts = _visible_sides(np.array([16.0, 5.0]), CAR_L, CAR_W, h)
+    fit = fit_boxes(pts, _one(pts), SENSOR)
+    assert 0.0 <= fit.angle_rad[0] < math.pi / 2
+    assert _angle_err_deg(fit.angle_rad[0], h, math.pi / 2) <= 0.05
+    proj = pts @ fit.axes[0].T  # every point inside its box, the extremes on the sides
+    np.testing.assert_allclose(proj.min(axis=0), fit.lo_m[0], atol=1e-9)
+    np.testing.assert_allclose(proj.max(axis=0), fit.hi_m[0], atol=1e-9)
+    assert sorted(fit.extent_m[0]) == pytest.approx([CAR_W, CAR_L], abs=0.02)
+    assert fit.rms_m[0] < 0.01
+
+
+def test_segment_runs_without_joins_are_the_a8_clusters() -> None:
+    from fusiontrack.laser.clustering import cluster_scan
+
+    rng = np.random.default_rng(3)
+    r = np.repeat(rng.uniform(2.0, 60.0, 40), rng.integers(1, 12, 40))  # flat runs at random ranges
+    r = r + rng.normal(0.0, 0.02, r.size)
+    r[rng.random(r.size) < 0.1] = np.nan  # invalid beams and gaps
+    r[rng.random(r.size) < 0.03] = np.inf
+    inc = math.radians(0.5)
+    labels, n_points, mean_range = segment_scan(r, -1.0, inc, c0_m=0.5, n_min=1, grazing_deg=None)
+    ref = cluster_scan(r, -1.0, inc, c0_m=0.5, n_min=1)
+    np.testing.assert_array_equal(labels, ref.labels)
+    np.testing.assert_array_equal(n_points, ref.n_points)
+    np.testing.assert_allclose(mean_range, ref.mean_range_m, rtol=1e-12)
+
+
 # ---- completion with the class prior --------------------------------------------------------------------------
 
 

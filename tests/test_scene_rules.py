@@ -394,6 +394,44 @@ def test_rule_naming_a_missing_zone_is_refused(road) -> None:
     SceneUnderstanding(road, expr_ok)
 
 
+def test_rules_pickle_and_arithmetic_conditions_do_not_warn(road) -> None:
+    import pickle
+    import warnings
+
+    rules = parse_rules({"rules": {"a": {"when": "speed / (lane_offset - lane_offset) > 1 or not on_road"}}})
+    back = pickle.loads(pickle.dumps(rules))
+    env = {"speed": np.array([1.0, 0.0, np.nan]), "lane_offset": np.zeros(3), "on_road": np.array([True, True, False])}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # x / 0 and 0 / 0 are inf and NaN, silently
+        for r in (rules, back):
+            np.testing.assert_array_equal(r.rules[0].when(env, 3), [True, False, True])
+    default = pickle.loads(pickle.dumps(default_rules()))
+    assert [r.when.text for r in default.rules] == [r.when.text for r in default_rules().rules]
+    n = 4
+    env = {p: np.zeros(n) for p in ("speed", "edge_distance", "predicted_edge_distance", "lateral_speed",
+                                    "lane_cos", "time_on_road")}
+    env.update(on_road=np.ones(n, bool), in_lane=np.ones(n, bool), measured=np.ones(n, bool))
+    zone = lambda fn, arg: np.zeros(n, bool)  # noqa: E731
+    for a, b in zip(default.rules, default_rules().rules, strict=True):
+        if a.spec.entity != "lane_zone":
+            np.testing.assert_array_equal(a.when({**env, **a.env}, n, zone), b.when({**env, **b.env}, n, zone))
+
+
+def test_dense_frames_grow_the_history_and_keep_the_median(road) -> None:
+    from fusiontrack.scene.rules import SwitchingControl
+
+    control = SwitchingControl(road, default_rules())
+    rate, window = 100.0, 0.5  # 50 samples in the median window, more than the ring holds at first
+    vx = 10.0 + np.arange(300) % 7  # m/s, known samples
+    for i in range(300):
+        t_ns = round(i / rate * 1e9)
+        frame = control.observe(t_ns, [TrackState(t_ns, "test", 1, np.array([-100.0 + 0.1 * i, -1.75]),
+                                                  np.array([vx[i], 0.0]))])
+        recent = vx[max(0, i - round(window * rate) + 1):i + 1]  # the samples newer than 0.5 s
+        assert frame.props["speed"][0] == pytest.approx(np.median(recent), abs=1e-12)
+        assert frame.velocity_mps[0, 0] == pytest.approx(np.median(recent), abs=1e-12)
+
+
 def test_geometry_without_lane_zones_skips_jams(caplog) -> None:
     bare = parse_road_geometry({k: v for k, v in ROAD.items() if k != "zones"}, "bare road")
     out, _ = run_online(bare, [stop_track(t_end=31.0, drive_on=False, rate_hz=10.0)])

@@ -46,6 +46,7 @@ front of open space); two vehicles touching in the scan are one cluster.
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import math
@@ -58,7 +59,7 @@ import numpy as np
 
 from fusiontrack.errors import ConfigError
 from fusiontrack.laser.background import BeamBackground, InitMethod
-from fusiontrack.laser.clustering import cluster_scan
+from fusiontrack.laser.clustering import breakpoint_c1
 from fusiontrack.laser.detector import planar_pose
 from fusiontrack.tracking import kalman
 from fusiontrack.tracking.association import hungarian
@@ -228,24 +229,44 @@ def segment_scan(ranges_m: Any, angle_min_rad: float, angle_increment_rad: float
         raise ValueError(f"grazing_deg: expected an angle in (0, 90) degrees or None, got {grazing_deg}")
     if isinstance(n_min, bool) or not isinstance(n_min, int | np.integer) or n_min < 1:
         raise ValueError(f"n_min: expected an integer >= 1, got {n_min!r}")
-    cl = cluster_scan(ranges_m, angle_min_rad, angle_increment_rad, c0_m=c0_m, n_min=1)
+    c0 = float(c0_m)
+    if not (math.isfinite(c0) and c0 >= 0):
+        raise ValueError(f"c0_m: expected a finite value >= 0, got {c0}")
+    if not math.isfinite(float(angle_min_rad)):
+        raise ValueError(f"angle_min_rad: expected a finite angle, got {angle_min_rad}")
+    if not (math.isfinite(float(angle_increment_rad)) and angle_increment_rad != 0):
+        raise ValueError(f"angle_increment_rad: expected a finite non-zero angle, got {angle_increment_rad}")
     r = np.asarray(ranges_m, dtype=np.float64).reshape(-1)
-    k = len(cl)
+    # A8 runs as cluster_scan(..., n_min=1) finds them (without the centroids, bearings and widths it also computes)
+    beams = np.flatnonzero(np.isfinite(r))
+    beams = beams[r[beams] > 0]
+    rv = r[beams]
+    r0, r1 = rv[:-1], rv[1:]
+    gap2 = r0 * r0 + r1 * r1 - (2.0 * math.cos(angle_increment_rad)) * (r0 * r1)
+    th = c0 + breakpoint_c1(angle_increment_rad) * np.minimum(r0, r1)
+    first = np.ones(beams.size, dtype=bool)
+    first[1:] = (np.diff(beams) != 1) | (gap2 > th * th)  # an invalid beam or a jump ends a cluster
+    run = first.cumsum(dtype=np.intp) - 1  # A8 cluster of each valid beam
+    n_points = np.bincount(run).astype(np.int64)
+    k = n_points.size
+    start = beams[first].astype(np.int64)
+    stop = start + n_points
+    mean_range = np.bincount(run, rv, k) / np.maximum(n_points, 1).astype(np.float64)
+    # joins across grazing sides
     join = np.zeros(k, bool)  # join[j]: cluster j continues cluster j - 1
     inc = abs(float(angle_increment_rad))
     if k > 1 and grazing_deg is not None and math.radians(float(grazing_deg)) > inc:
-        ra, rb = r[cl.stop[:-1] - 1], r[cl.start[1:]]
+        ra, rb = r[stop[:-1] - 1], r[start[1:]]
         gap2 = ra * ra + rb * rb - 2.0 * math.cos(inc) * ra * rb
         d_max = np.minimum(ra, rb) * math.sin(inc) / math.sin(math.radians(float(grazing_deg)) - inc)
-        join[1:] = (cl.start[1:] == cl.stop[:-1]) & (gap2 <= d_max * d_max)
-    merged = np.cumsum(~join) - 1  # new id of each A8 cluster
-    size = np.bincount(merged, weights=cl.n_points, minlength=int(merged[-1]) + 1 if k else 0).astype(np.int64)
-    rsum = np.bincount(merged, weights=cl.mean_range_m * cl.n_points, minlength=size.size)
+        join[1:] = (start[1:] == stop[:-1]) & (gap2 <= d_max * d_max)
+    merged = (~join).cumsum() - 1  # new id of each A8 cluster
+    size = np.bincount(merged, weights=n_points, minlength=int(merged[-1]) + 1 if k else 0).astype(np.int64)
+    rsum = np.bincount(merged, weights=mean_range * n_points, minlength=size.size)
     keep = size >= n_min
-    new_id = np.where(keep, np.cumsum(keep) - 1, -1)
+    new_id = np.where(keep, keep.cumsum() - 1, -1)
     labels = np.full(r.size, -1, np.int64)
-    on = cl.labels >= 0
-    labels[on] = new_id[merged[cl.labels[on]]]
+    labels[beams] = new_id[merged[run]]
     return labels, size[keep], rsum[keep] / np.maximum(size[keep], 1)
 
 
@@ -297,38 +318,143 @@ class BoxFit:
         return np.einsum("kij,ki->kj", self.axes, 0.5 * (self.lo_m + self.hi_m))
 
 
-def _side_cost(q: np.ndarray, pos: np.ndarray, starts: np.ndarray, ang: np.ndarray,
-               srel: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+@dataclass(frozen=True, slots=True, eq=False)
+class _Clusters:
+    """The points of ``k`` clusters ready for :func:`_fit`: sorted by cluster and centred on their cluster's mean
+    (well-conditioned projections). Built once per labelling and shared by the search and every refit."""
+
+    k: int
+    counts: np.ndarray  # (k,) int64 points per cluster
+    present: np.ndarray  # (kp,) the clusters with points
+    sizes: np.ndarray  # (kp,) int64 their point counts
+    cnt: np.ndarray  # (kp,) float64 the same
+    starts: np.ndarray  # (kp,) first point of each present cluster
+    mean: np.ndarray  # (kp, 2)
+    qx: np.ndarray  # (n,) points minus their cluster's mean, contiguous x and y
+    qy: np.ndarray
+    srel: np.ndarray | None  # (kp, 2) sensor minus cluster mean, or None
+    ordered: bool  # the points were given sorted by cluster, none dropped (``starts`` index them as given)
+
+
+def _clusters(p: np.ndarray, lab: np.ndarray, k: int, sensor: np.ndarray | None) -> _Clusters:
+    """:class:`_Clusters` of checked points ``(n, 2)`` float64 and labels ``(n,)`` int64 (``< k``)."""
+    ok = (lab >= 0) & np.isfinite(p).all(axis=1)
+    ordered = bool(ok.all())
+    if not ordered:
+        p, lab = p[ok], lab[ok]
+    if lab.size > 1 and (lab[1:] < lab[:-1]).any():
+        order = lab.argsort(kind="stable")
+        p, lab = p[order], lab[order]
+        ordered = False
+    counts = np.bincount(lab, minlength=k)
+    present = np.flatnonzero(counts)
+    cp = counts[present] if present.size != k else counts
+    starts = cp.cumsum() - cp
+    cnt = cp.astype(np.float64)
+    px, py = p[:, 0], p[:, 1]
+    if present.size:
+        mx, my = np.add.reduceat(px, starts) / cnt, np.add.reduceat(py, starts) / cnt
+    else:
+        mx = my = np.zeros(0)
+    mean = np.empty((present.size, 2))
+    mean[:, 0], mean[:, 1] = mx, my
+    return _Clusters(k, counts.astype(np.int64), present, cp, cnt, starts, mean, px - mx.repeat(cp), py - my.repeat(cp),
+                     None if sensor is None else sensor - mean, ordered)
+
+
+@functools.lru_cache(maxsize=16)
+def _grid(n_ang: int, step_rad: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The search angles ``(A,)``, their cosines and sines as ``(A, 1)`` columns (the same for every cluster)
+    and the refinement offsets ``(41, 1)``; read-only."""
+    ang = np.arange(n_ang) * step_rad
+    out = (ang, np.cos(ang)[:, None], np.sin(ang)[:, None], np.linspace(-step_rad, step_rad, 41)[:, None])
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
+def _side_cost(cl: _Clusters, c: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """L-shape cost of every candidate angle of every cluster.
 
     Parameters
     ----------
-    q : (n, 2) points minus their cluster's mean, sorted by cluster; pos : (n,) cluster of each point
-    (0..kp-1); starts : (kp,) first point of each cluster; ang : (A, kp) candidate angles per cluster;
-    srel : (kp, 2) sensor minus cluster mean, or None (then each point takes the nearer of all four sides).
+    cl : the clusters; c, s : (A, kp) cosines and sines of the candidate angles per cluster, or (A, 1) when every
+    cluster has the same candidates (then each point takes the nearer of all four sides when ``cl.srel`` is None).
 
     Returns
     -------
-    cost : (A, kp) sum of squared distances to the nearer fitted side; lo, hi : (A, kp, 2) extents.
+    cost : (A, kp) sum of squared distances to the nearer fitted side; lo, hi : (2A, kp) the extreme projections
+    on ``a0`` (rows ``0 .. A - 1``) and on ``a1`` (rows ``A .. 2A - 1``).
     """
-    c, s = np.cos(ang), np.sin(ang)
-    cp, sp = c[:, pos], s[:, pos]
-    U = cp * q[:, 0] + sp * q[:, 1]  # (A, n)
-    V = cp * q[:, 1] - sp * q[:, 0]
-    umin, umax = np.minimum.reduceat(U, starts, axis=1), np.maximum.reduceat(U, starts, axis=1)
-    vmin, vmax = np.minimum.reduceat(V, starts, axis=1), np.maximum.reduceat(V, starts, axis=1)
-    if srel is None:
-        du = np.minimum(U - umin[:, pos], umax[:, pos] - U)
-        dv = np.minimum(V - vmin[:, pos], vmax[:, pos] - V)
+    sizes, starts = cl.sizes, cl.starts
+    n_a = c.shape[0]
+    cp, sp = (c, s) if c.shape[1] == 1 else (c.repeat(sizes, axis=1), s.repeat(sizes, axis=1))
+    uv = np.empty((2 * n_a, cl.qx.size))  # the projections on a0 (U) over those on a1 (V), (2A, n)
+    u, v = uv[:n_a], uv[n_a:]
+    np.multiply(cp, cl.qx, out=u)
+    u += sp * cl.qy
+    np.multiply(cp, cl.qy, out=v)
+    v -= sp * cl.qx
+    lo, hi = np.minimum.reduceat(uv, starts, axis=1), np.maximum.reduceat(uv, starts, axis=1)
+    if cl.srel is None:
+        d = np.minimum(uv - lo.repeat(sizes, axis=1), hi.repeat(sizes, axis=1) - uv)
     else:  # the sides the sensor can see: the end of each axis nearer to it
-        us = c * srel[:, 0] + s * srel[:, 1]
-        vs = c * srel[:, 1] - s * srel[:, 0]
-        uside = np.where(np.abs(us - umin) <= np.abs(us - umax), umin, umax)
-        vside = np.where(np.abs(vs - vmin) <= np.abs(vs - vmax), vmin, vmax)
-        du = U - uside[:, pos]
-        dv = V - vside[:, pos]
-    cost = np.add.reduceat(np.minimum(du * du, dv * dv), starts, axis=1)
-    return cost, np.stack([umin, vmin], -1), np.stack([umax, vmax], -1)
+        sx, sy = cl.srel[:, 0], cl.srel[:, 1]
+        sens = np.concatenate([c * sx + s * sy, c * sy - s * sx])  # the sensor's projections, (2A, kp)
+        d = np.subtract(uv, np.where(np.abs(sens - lo) <= np.abs(sens - hi), lo, hi).repeat(sizes, axis=1), out=uv)
+    d *= d
+    cost = np.add.reduceat(np.minimum(d[:n_a], d[n_a:]), starts, axis=1)
+    return cost, lo, hi
+
+
+def _fit(cl: _Clusters, n_ang: int, step_rad: float, refine: bool, fixed: np.ndarray | None = None) -> BoxFit:
+    """:func:`fit_boxes` of prepared clusters; ``fixed`` (kp,): a known orientation per present cluster, ``NaN``
+    where it is to be searched (None: search all)."""
+    k, present = cl.k, cl.present
+    kp = present.size
+    if kp == 0:
+        nan2 = np.full((k, 2), np.nan)
+        return BoxFit(np.full(k, np.nan), nan2, nan2.copy(), np.full(k, np.nan), cl.counts)
+    search = np.ones(kp, bool) if fixed is None else ~np.isfinite(fixed)
+    theta = np.full(kp, np.nan) if fixed is None else np.mod(fixed, _HALF_PI)
+    done = None  # the cost and extents at theta, when the search already has them
+    if search.any():
+        ang, cg, sg, offsets = _grid(n_ang, step_rad)
+        cost = _side_cost(cl, cg, sg)[0]
+        best = ang[cost.argmin(axis=0)]
+        if refine:
+            fine = best[None, :] + offsets
+            cost, lo_a, hi_a = _side_cost(cl, np.cos(fine), np.sin(fine))
+            i, cols = cost.argmin(axis=0), np.arange(kp)
+            best = fine[i, cols]
+            if fixed is None:
+                done = cost[i, cols][None, :], lo_a[[i, i + offsets.size], cols], hi_a[[i, i + offsets.size], cols]
+        theta = np.mod(best, _HALF_PI)  # a rectangle repeats every 90°
+        if fixed is not None:
+            theta = np.where(search, theta, np.mod(fixed, _HALF_PI))
+        if done is not None and not ((theta == best).all() and not np.signbit(theta).any()):
+            done = None  # an angle wrapped around: evaluate it there
+    c, s = np.cos(theta), np.sin(theta)
+    cost, lo_a, hi_a = done if done is not None else _side_cost(cl, c[None, :], s[None, :])
+    mx, my = cl.mean[:, 0], cl.mean[:, 1]
+    shift = np.array([c * mx + s * my, c * my - s * mx])
+    lo_p, hi_p = (lo_a + shift).T, (hi_a + shift).T
+    rms_p = np.sqrt(cost[0] / cl.cnt)
+    if kp == k:
+        return BoxFit(theta, lo_p, hi_p, rms_p, cl.counts)
+    angle, rms = np.full(k, np.nan), np.full(k, np.nan)
+    lo, hi = np.full((k, 2), np.nan), np.full((k, 2), np.nan)
+    angle[present], lo[present], hi[present], rms[present] = theta, lo_p, hi_p, rms_p
+    return BoxFit(angle, lo, hi, rms, cl.counts)
+
+
+def _step_grid(step_deg: float) -> tuple[int, float]:
+    """Number of search angles in 90° and the step in radians; ``ValueError`` unless the step divides 90°."""
+    step = float(step_deg)
+    n_ang = round(90.0 / step) if math.isfinite(step) and step > 0 else 0
+    if not (0 < step <= 45.0 and abs(n_ang * step - 90.0) < 1e-6):
+        raise ValueError(f"step_deg: expected a step in (0, 45] degrees that divides 90, got {step_deg}")
+    return n_ang, math.radians(step)
 
 
 def fit_boxes(points_m: Any, labels: Any, sensor_m: Any = None, *, n_clusters: int | None = None,
@@ -375,10 +501,7 @@ def fit_boxes(points_m: Any, labels: Any, sensor_m: Any = None, *, n_clusters: i
     if lab.size and not np.issubdtype(lab.dtype, np.integer):
         raise ValueError(f"labels: expected integers, got dtype {lab.dtype}")
     lab = lab.astype(np.int64)
-    step = float(step_deg)
-    n_ang = round(90.0 / step) if math.isfinite(step) and step > 0 else 0
-    if not (0 < step <= 45.0 and abs(n_ang * step - 90.0) < 1e-6):
-        raise ValueError(f"step_deg: expected a step in (0, 45] degrees that divides 90, got {step_deg}")
+    n_ang, step_rad = _step_grid(step_deg)
     k = int(lab.max()) + 1 if n_clusters is None and lab.size else int(n_clusters or 0)
     if lab.size and lab.max() >= k:
         raise ValueError(f"labels: label {int(lab.max())} out of range for n_clusters = {k}")
@@ -387,46 +510,10 @@ def fit_boxes(points_m: Any, labels: Any, sensor_m: Any = None, *, n_clusters: i
         sensor = np.asarray(sensor_m, dtype=np.float64).reshape(-1)
         if sensor.shape != (2,) or not np.all(np.isfinite(sensor)):
             raise ValueError(f"sensor_m: expected a finite (2,) position, got {sensor_m!r}")
-    ok = (lab >= 0) & np.isfinite(p).all(axis=1)
-    p, lab = p[ok], lab[ok]
-    order = np.argsort(lab, kind="stable")
-    p, lab = p[order], lab[order]
-    counts = np.bincount(lab, minlength=k)
-    present = np.flatnonzero(counts)
-    angle = np.full(k, np.nan)
-    lo, hi = np.full((k, 2), np.nan), np.full((k, 2), np.nan)
-    rms = np.full(k, np.nan)
-    if present.size == 0:
-        return BoxFit(angle, lo, hi, rms, counts.astype(np.int64))
-    cnt = counts[present].astype(np.float64)
-    starts = np.cumsum(counts[present]) - counts[present]
-    pos = np.repeat(np.arange(present.size), counts[present])
-    mean = np.column_stack([np.add.reduceat(p[:, 0], starts), np.add.reduceat(p[:, 1], starts)]) / cnt[:, None]
-    q = p - mean[pos]  # centred: well-conditioned projections
-    srel = None if sensor is None else sensor - mean
-    step_rad = math.radians(step)
-    cols = np.arange(present.size)
-    fixed = np.full(present.size, np.nan) if angle_rad is None else np.broadcast_to(
-        np.asarray(angle_rad, dtype=np.float64), (k,))[present]
-    search = ~np.isfinite(fixed)
-    theta = np.mod(fixed, _HALF_PI)
-    if search.any():
-        grid = np.broadcast_to((np.arange(n_ang) * step_rad)[:, None], (n_ang, present.size))
-        cost, _, _ = _side_cost(q, pos, starts, grid, srel)
-        best = grid[np.argmin(cost, axis=0), cols]
-        if refine:
-            fine = best[None, :] + np.linspace(-step_rad, step_rad, 41)[:, None]
-            cost, _, _ = _side_cost(q, pos, starts, fine, srel)
-            best = fine[np.argmin(cost, axis=0), cols]
-        theta = np.where(search, np.mod(best, _HALF_PI), theta)  # a rectangle repeats every 90°
-    cost, lo_a, hi_a = _side_cost(q, pos, starts, theta[None, :], srel)
-    c, s = np.cos(theta), np.sin(theta)
-    shift = np.column_stack([c * mean[:, 0] + s * mean[:, 1], c * mean[:, 1] - s * mean[:, 0]])
-    angle[present] = theta
-    lo[present] = lo_a[0] + shift
-    hi[present] = hi_a[0] + shift
-    rms[present] = np.sqrt(cost[0] / cnt)
-    return BoxFit(angle, lo, hi, rms, counts.astype(np.int64))
+    cl = _clusters(p, lab, k, sensor)
+    fixed = None if angle_rad is None else np.broadcast_to(np.asarray(angle_rad, dtype=np.float64),
+                                                            (k,))[cl.present]
+    return _fit(cl, n_ang, step_rad, refine, fixed)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -547,60 +634,122 @@ def complete_boxes(fit: BoxFit, sensor_m: Any, length_axis: Any, profile_m: Any,
     sensor = np.asarray(sensor_m, dtype=np.float64).reshape(-1)
     if sensor.shape != (2,) or not np.all(np.isfinite(sensor)):
         raise ValueError(f"sensor_m: expected a finite (2,) position, got {sensor_m!r}")
-    ax = np.broadcast_to(np.asarray(length_axis, dtype=np.int64), (k,))
-    prof = np.broadcast_to(np.asarray(profile_m, dtype=np.float64), (k, 2))
-    dsig = np.broadcast_to(np.asarray(dims_sigma_m, dtype=np.float64), (k, 2))
-    swap = (ax == 1)[:, None]
-    prof_f = np.where(swap, prof[:, ::-1], prof)  # along the fit's axes (a0, a1)
-    dsig_f = np.where(swap, dsig[:, ::-1], dsig)
-    axes = fit.axes
-    lo, hi = fit.lo_m, fit.hi_m
-    e = hi - lo
-    s = np.einsum("kij,j->ki", axes, sensor)
-    size = np.fmax(e, prof_f)
-    grow = size - e
-    below, above = s <= lo, s >= hi
-    from_lo, from_hi = below, above & ~below  # default: grow from the end that faces the sensor
-    new_lo = np.where(from_lo, lo, np.where(from_hi, hi - size, lo - 0.5 * grow))
+    ep = occ = None
     if edge_points_m is not None and edge_occluded is not None:
         ep = np.broadcast_to(np.asarray(edge_points_m, dtype=np.float64), (k, 2, 2))
         occ = np.broadcast_to(np.asarray(edge_occluded, dtype=bool), (k, 2))
-        proj = np.einsum("kia,kja->kij", axes, ep)  # (k, axis, edge point)
-        # Along the surface, the next beam passes up to ``gap`` beyond a free edge point: r Δθ / sin(incidence).
-        ray = ep - sensor
-        rng = np.hypot(ray[..., 0], ray[..., 1])
-        sin_inc = np.abs(np.einsum("kja,kia->kij", ray, axes[:, :, ::-1] * [1.0, -1.0])) / np.maximum(
-            rng[:, None, :], 1e-9)
-        gap = rng[:, None, :] * abs(float(angle_increment_rad)) / np.maximum(sin_inc, math.sin(math.radians(3.0)))
-        # Each edge point ends the seen side it lies on: the side along axis i is the one at the sensor-facing
-        # end of the other axis; the point tells about axis i only.
-        side = np.where(np.abs(s - lo) <= np.abs(s - hi), lo, hi)  # sensor-facing end of each axis (k, 2)
-        off = np.abs(proj - side[:, :, None])  # (k, axis, point): distance to the side across that axis
-        tol = 0.1  # a point within tol of both sides (a corner) ends both
-        along = np.stack([off[:, 1] <= np.fmax(off[:, 0], tol), off[:, 0] <= np.fmax(off[:, 1], tol)], axis=1)
-        at_lo = along & (e > 2 * tol)[:, :, None] & (proj - lo[:, :, None] <= tol)
-        at_hi = along & (e > 2 * tol)[:, :, None] & (hi[:, :, None] - proj <= tol)
-        occ_lo, occ_hi = (at_lo & occ[:, None, :]).any(axis=2), (at_hi & occ[:, None, :]).any(axis=2)
-        gap_lo = np.where(at_lo & ~occ[:, None, :], gap, 0.0).max(axis=2)
-        gap_hi = np.where(at_hi & ~occ[:, None, :], gap, 0.0).max(axis=2)
+    return _complete(_box_frame(fit.angle_rad, fit.lo_m, fit.hi_m, sensor, ep, occ, angle_increment_rad),
+                     np.broadcast_to(np.asarray(length_axis, dtype=np.int64), (k,)),
+                     np.broadcast_to(np.asarray(profile_m, dtype=np.float64), (k, 2)),
+                     np.broadcast_to(np.asarray(dims_sigma_m, dtype=np.float64), (k, 2)),
+                     np.broadcast_to(np.asarray(sigma_m, dtype=np.float64), (k,)),
+                     np.broadcast_to(np.asarray(quant_m, dtype=np.float64), (k,)))
+
+
+def _unsigned_heading(angle: np.ndarray, e: np.ndarray, hint: np.ndarray,
+                      long_side_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`box_heading` without a signed hint, of angles ``(k,)``, extents ``(k, 2)`` and hints ``(k,)``."""
+    longer = e[:, 1] > e[:, 0]
+    rel = hint - angle
+    hint_axis = np.abs(np.sin(rel)) > np.abs(np.cos(rel))
+    with np.errstate(invalid="ignore"):
+        clear = np.fmax(e[:, 0], e[:, 1]) > long_side_m
+    axis = np.where(clear | ~np.isfinite(hint), longer, hint_axis).astype(np.int64)
+    heading = angle + axis * _HALF_PI
+    with np.errstate(invalid="ignore"):
+        heading = heading - np.where(heading > _HALF_PI, math.pi, 0.0)  # in (-π/2, π/2]: no wrap at -π needed
+    return heading, axis
+
+
+def _axes(angle: np.ndarray) -> np.ndarray:
+    """Unit axes ``(k, 2, 2)`` of boxes at ``angle`` (:attr:`BoxFit.axes`)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([c, s, -s, c]).T.reshape(-1, 2, 2)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _BoxFrame:
+    """What :func:`complete_boxes` takes of the fitted boxes, the sensor and the cluster ends, whatever the prior
+    (``(k, 2)`` arrays per fit axis; the occlusion ones ``None`` without edge points)."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    axes: np.ndarray  # (k, 2, 2)
+    e: np.ndarray  # seen extent
+    from_lo: np.ndarray  # the end facing the sensor: grow from lo ...
+    from_hi: np.ndarray  # ... or from hi
+    hidden_lo: np.ndarray | None  # only the lo end is hidden by an occluder
+    hidden_hi: np.ndarray | None
+    gap_lo: np.ndarray | None  # how far the vehicle may go on unseen beyond a free lo end
+    gap_hi: np.ndarray | None
+
+
+def _box_frame(angle: np.ndarray, lo: np.ndarray, hi: np.ndarray, sensor: np.ndarray, ep: np.ndarray | None,
+               occ: np.ndarray | None, inc: float) -> _BoxFrame:
+    """:class:`_BoxFrame` of checked arrays: ``angle`` (k,), ``lo``/``hi`` (k, 2), ``sensor`` (2,), ``ep``
+    (k, 2, 2) and ``occ`` (k, 2) or None (see :func:`complete_boxes`)."""
+    axes = _axes(angle)
+    e = hi - lo
+    s = np.einsum("kij,j->ki", axes, sensor)
+    below, above = s <= lo, s >= hi
+    if ep is None or occ is None or not occ.any():  # no end hidden: nothing for the occlusion rule to do
+        return _BoxFrame(lo, hi, axes, e, below, above & ~below, None, None, None, None)
+    proj = np.einsum("kia,kja->kij", axes, ep)  # (k, axis, edge point)
+    # Along the surface, the next beam passes up to ``gap`` beyond a free edge point: r Δθ / sin(incidence).
+    ray = ep - sensor
+    rng = np.hypot(ray[..., 0], ray[..., 1])
+    # |ray x a_i| = |ray . (the other axis)|: the other axis is ±axes[:, ::-1]
+    sin_inc = np.abs(np.einsum("kja,kia->kij", ray, axes[:, ::-1])) / np.maximum(rng[:, None, :], 1e-9)
+    gap = rng[:, None, :] * abs(float(inc)) / np.maximum(sin_inc, _SIN_3_DEG)
+    # Each edge point ends the seen side it lies on: the side along axis i is the one at the sensor-facing
+    # end of the other axis; the point tells about axis i only.
+    side = np.where(np.abs(s - lo) <= np.abs(s - hi), lo, hi)  # sensor-facing end of each axis (k, 2)
+    off = np.abs(proj - side[:, :, None])  # (k, axis, point): distance to the side across that axis
+    tol = 0.1  # a point within tol of both sides (a corner) ends both
+    along = (off[:, ::-1] <= np.fmax(off, tol)) & (e > 2 * tol)[:, :, None]
+    at_lo = along & (proj - lo[:, :, None] <= tol)
+    at_hi = along & (hi[:, :, None] - proj <= tol)
+    hidden, free = occ[:, None, :], ~occ[:, None, :]
+    occ_lo, occ_hi = (at_lo & hidden).any(axis=2), (at_hi & hidden).any(axis=2)
+    return _BoxFrame(lo, hi, axes, e, below, above & ~below, occ_lo & ~occ_hi, occ_hi & ~occ_lo,
+                     np.where(at_lo & free, gap, 0.0).max(axis=2), np.where(at_hi & free, gap, 0.0).max(axis=2))
+
+
+def _complete(fr: _BoxFrame, ax: np.ndarray, prof: np.ndarray, dsig: np.ndarray, sig: np.ndarray,
+              quant: np.ndarray, centre_only: bool = False) -> CompletedBoxes | np.ndarray:
+    """:func:`complete_boxes` of a :class:`_BoxFrame` and checked arrays: ``ax`` (k,) int, ``prof``/``dsig``
+    (k, 2), ``sig``/``quant`` (k,); only the centres ``(k, 2)`` when ``centre_only``."""
+    lo, hi, e, axes = fr.lo, fr.hi, fr.e, fr.axes
+    swap = (ax == 1)[:, None]
+    prof_f = np.where(swap, prof[:, ::-1], prof)  # along the fit's axes (a0, a1)
+    size = np.fmax(e, prof_f)
+    grow = size - e
+    from_lo, from_hi = fr.from_lo, fr.from_hi  # default: grow from the end that faces the sensor
+    new_lo = np.where(from_lo, lo, np.where(from_hi, hi - size, lo - 0.5 * grow))
+    if fr.hidden_lo is not None:
         # One end hidden by an occluder, the other a free end: trust the free end when the vehicle can end at
         # most ``gap`` beyond it, less than the size still missing (else the occluded end is the better guess).
-        use_hi = occ_lo & ~occ_hi & (gap_hi < grow)
-        use_lo = occ_hi & ~occ_lo & (gap_lo < grow)
-        new_lo = np.where(use_hi, hi + np.minimum(0.5 * gap_hi, grow) - size,
-                          np.where(use_lo, lo - np.minimum(0.5 * gap_lo, grow), new_lo))
+        use_hi = fr.hidden_lo & (fr.gap_hi < grow)
+        use_lo = fr.hidden_hi & (fr.gap_lo < grow)
+        new_lo = np.where(use_hi, hi + np.minimum(0.5 * fr.gap_hi, grow) - size,
+                          np.where(use_lo, lo - np.minimum(0.5 * fr.gap_lo, grow), new_lo))
         from_lo, from_hi = from_lo | use_lo, from_hi | use_hi
     centre = np.einsum("kij,ki->kj", axes, new_lo + 0.5 * size)
+    if centre_only:
+        return centre
+    dsig_f = np.where(swap, dsig[:, ::-1], dsig)
     from_prior = grow > 1e-9
     ambiguous = from_prior & ~from_lo & ~from_hi
-    quant = np.broadcast_to(np.asarray(quant_m, dtype=np.float64), (k,))
-    sig = np.broadcast_to(np.asarray(sigma_m, dtype=np.float64), (k,))
     var = (sig[:, None] ** 2 + quant[:, None] ** 2 / 12.0 + np.where(from_prior, (0.5 * dsig_f) ** 2, 0.0)
            + np.where(ambiguous, (0.5 * grow) ** 2 / 3.0, 0.0))
     cov = np.einsum("kia,ki,kib->kab", axes, var, axes)
-    order = np.where(swap, [1, 0], [0, 1])
-    take = np.arange(k)[:, None]
-    return CompletedBoxes(centre, size[take, order], e[take, order], from_prior[take, order], cov)
+    return CompletedBoxes(centre, np.where(swap, size[:, ::-1], size), np.where(swap, e[:, ::-1], e),
+                          np.where(swap, from_prior[:, ::-1], from_prior), cov)
+
+
+_SIN_3_DEG = math.sin(math.radians(3.0))
+_STEP_OUT = np.array([-1, 1])  # the beams before a cluster's first point and after its last
+_STEP_OUT.setflags(write=False)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -671,6 +820,8 @@ class RoadROI:
 
     def direction_at(self, points_m: Any) -> np.ndarray:
         """Driving axis (radians, modulo π) of the road nearest to each point, ``(n,)``."""
+        if len(self.polygons) == 1:  # the only road is the nearest
+            return np.full(np.asarray(points_m).reshape(-1, 2).shape[0], self.directions_rad[0])
         return self.directions_rad[np.argmax(self._signed(points_m), axis=0)]
 
     def _signed(self, points_m: Any) -> np.ndarray:
@@ -789,6 +940,8 @@ class _Laser:
         self.origin = np.zeros((0, 2))  # where the direction of travel was last measured
 
     def keep(self, mask: np.ndarray) -> None:
+        if mask.all():
+            return
         for name in ("x", "P", "ids", "last_ns", "hits", "votes", "heading", "dims", "origin"):
             setattr(self, name, getattr(self, name)[mask])
 
@@ -905,6 +1058,7 @@ class LaserVehicleDetector:
         self.grazing_deg = grazing_deg
         self.min_points = _count(min_points, "min_points")
         self.step_deg = float(step_deg)
+        self._n_ang, self._step_rad = _step_grid(step_deg)
         self.min_fit_extent_m = _positive(min_fit_extent_m, "min_fit_extent_m", allow_zero=True)
         self.long_side_m = _positive(long_side_m, "long_side_m")
         self.max_rms_m = _positive(max_rms_m, "max_rms_m")
@@ -915,6 +1069,8 @@ class LaserVehicleDetector:
         self._profile = np.array([[p.profile_length_m, p.profile_width_m] for p in self.priors.values()])
         self._dims = np.array([[p.length_m, p.width_m] for p in self.priors.values()])
         self._dsig = np.array([[p.sigma_length_m, p.sigma_width_m] for p in self.priors.values()])
+        self._footprint_extra = self._dims - self._profile  # footprint minus scan-plane profile, per class
+        self._max_extent = self._profile + 3.0 * self._dsig  # the largest plausible seen extent, per class
         self.sigma_m = _positive(sigma_m, "sigma_m")
         self.q = _positive(q, "q")
         self.gate_m = _positive(gate_m, "gate_m")
@@ -927,6 +1083,7 @@ class LaserVehicleDetector:
         self.class_votes = _count(class_votes, "class_votes")
         self.people = bool(people)
         self._next_id = 1  # track ids are unique over all of this detector's lasers
+        self._cv: tuple[int, np.ndarray, np.ndarray] | tuple[None, None, None] = (None, None, None)
         self.dropped_scans: dict[str, int] = dict.fromkeys(self._lasers, 0)
         """Scans dropped per scanner: out of time order, or without usable beam angles."""
         self._warned: set[str] = set()
@@ -1008,34 +1165,39 @@ class LaserVehicleDetector:
         labels = beam_labels[on]
         k = n_points.size
         inc = scan.angle_increment_rad
-        fit = fit_boxes(points, labels, st.translation, n_clusters=k, step_deg=self.step_deg)
+        cl = _clusters(points, labels, k, st.translation)
+        fit = _fit(cl, self._n_ang, self._step_rad, True)
         quant = mean_range * abs(inc)
-        edges = self._edges(on, labels, k, points, r)
+        edges = self._edges(on, labels, k, points, r, cl)
         # First pass (road direction only) to associate; second pass with the tracks' headings.
-        road_dir = self.roi.direction_at(fit.centre_m) if self.roi is not None else np.full(k, np.nan)
-        first = self._boxes(st, fit, points, labels, road_dir, np.full(k, np.nan), None, quant, edges, inc)[0]
-        pairs = self._associate(st, first.centre_m)
-        join = self._fragments(st, pairs, first.centre_m)
+        road_dir = self._road_direction(fit)
+        if st.ids.size:
+            centres, first = self._boxes(st, cl, fit, road_dir, None, None, quant, edges, inc)
+            pairs = self._associate(st, centres)
+            join = self._fragments(st, pairs, centres)
+        else:  # nothing to associate with
+            first, pairs, join = None, np.zeros((0, 2), np.int64), None
         if join is not None:  # pieces of one vehicle split by an occluder: one cluster, fitted again
             labels = join[labels]
             k = int(join.max()) + 1
             pairs[:, 1] = join[pairs[:, 1]]
             n_points = np.bincount(labels, minlength=k)
             quant = np.bincount(labels, weights=r[on], minlength=k) / n_points * abs(inc)
-            fit = fit_boxes(points, labels, st.translation, n_clusters=k, step_deg=self.step_deg)
-            edges = self._edges(on, labels, k, points, r)
-            road_dir = self.roi.direction_at(fit.centre_m) if self.roi is not None else np.full(k, np.nan)
+            cl = _clusters(points, labels, k, st.translation)
+            fit = _fit(cl, self._n_ang, self._step_rad, True)
+            edges = self._edges(on, labels, k, points, r, cl)
+            road_dir = self._road_direction(fit)
+            first = None
         hint, sign_dir = road_dir.copy(), np.full(k, np.nan)
         track_of = np.full(k, -1, np.int64)
         if pairs.size:
             ti, di = pairs[:, 0], pairs[:, 1]
             track_of[di] = ti
             hint[di], sign_dir[di] = self._track_hints(st, ti, road_dir[di])
-        boxes, heading, cls, frame_cls = self._boxes(st, fit, points, labels, hint, sign_dir, track_of, quant,
-                                                     edges, inc)
+        boxes, heading, cls, frame_cls = self._boxes(st, cl, fit, hint, sign_dir, track_of, quant, edges, inc, first)
         signed = np.isfinite(sign_dir)
         ids, vel, probs = self._update(st, scan.t_ns, track_of, boxes, heading, signed, cls, frame_cls, fit.rms_m)
-        return self._detections(scan, labels, n_points, points, boxes, heading, cls, ids, vel, probs)
+        return self._detections(scan, labels, n_points, points, cl, boxes, heading, cls, ids, vel, probs)
 
     # ---------------------------------------------------------------------------------------------
     @staticmethod
@@ -1053,7 +1215,9 @@ class LaserVehicleDetector:
     @staticmethod
     def _to_road(st: _Laser, scan: LaserScan, beams: np.ndarray, r: np.ndarray) -> np.ndarray:
         a = scan.angle_min_rad + beams * scan.angle_increment_rad
-        local = np.column_stack([r[beams] * np.cos(a), r[beams] * np.sin(a)])
+        rb = r[beams]
+        local = np.empty((beams.size, 2))
+        local[:, 0], local[:, 1] = rb * np.cos(a), rb * np.sin(a)
         return local @ st.rotation.T + st.translation
 
     def _track_hints(self, st: _Laser, rows: np.ndarray, road_dir: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1092,69 +1256,91 @@ class LaserVehicleDetector:
         target[free[ok]] = pairs[near[ok], 1]
         return np.unique(target, return_inverse=True)[1].astype(np.int64)
 
-    def _edges(self, on: np.ndarray, labels: np.ndarray, k: int, points: np.ndarray,
-               r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _edges(self, on: np.ndarray, labels: np.ndarray, k: int, points: np.ndarray, r: np.ndarray,
+               cl: _Clusters) -> tuple[np.ndarray, np.ndarray]:
         """First and last point of each cluster in beam order ``(k, 2, 2)`` and whether the beam beyond each is
         nearer by more than ``c0_m`` or outside the field of view (an occluder's edge, not the vehicle's),
-        ``(k, 2)``. ``on`` (the beams of ``points``) is ascending."""
-        idx = np.arange(labels.size)
-        first = np.full(k, labels.size, np.int64)
-        last = np.full(k, -1, np.int64)
-        np.minimum.at(first, labels, idx)
-        np.maximum.at(last, labels, idx)
-        b = np.stack([on[first], on[last]], axis=1)  # beam indices
-        nb = b + np.array([-1, 1])
+        ``(k, 2)``. ``on`` (the beams of ``points``) is ascending; ``cl`` the clusters of ``points``."""
+        if cl.ordered and cl.present.size == k:  # beam-order runs: cluster j is points starts[j] .. + sizes[j]
+            first = cl.starts
+            last = first + cl.sizes - 1
+        else:
+            idx = np.arange(labels.size)
+            first = np.full(k, labels.size, np.int64)
+            last = np.full(k, -1, np.int64)
+            np.minimum.at(first, labels, idx)
+            np.maximum.at(last, labels, idx)
+        ends = np.array([first, last]).T  # (k, 2) points
+        b = on[ends]  # beam indices
+        nb = b + _STEP_OUT
         outside = (nb < 0) | (nb >= r.size)
-        r_nb = r[np.clip(nb, 0, r.size - 1)]
+        r_nb = r[np.minimum(np.maximum(nb, 0), r.size - 1)]
         with np.errstate(invalid="ignore"):
             nearer = r_nb < r[b] - self.c0_m  # NaN (no return, error): not an occluder
-        return np.stack([points[first], points[last]], axis=1), outside | nearer
+        return points[ends], outside | nearer
 
-    def _boxes(self, st: _Laser, fit: BoxFit, points: np.ndarray, labels: np.ndarray, hint: np.ndarray,
-               sign_dir: np.ndarray, track_of: np.ndarray | None, quant: np.ndarray,
-               edges: tuple[np.ndarray, np.ndarray], inc: float,
-               ) -> tuple[CompletedBoxes, np.ndarray, np.ndarray, np.ndarray]:
+    def _road_direction(self, fit: BoxFit) -> np.ndarray:
+        """The road's driving axis at each box's centre (``NaN`` without an ROI), ``(k,)``."""
+        if self.roi is None:
+            return np.full(len(fit), np.nan)
+        return self.roi.direction_at(np.einsum("kij,ki->kj", _axes(fit.angle_rad), 0.5 * (fit.lo_m + fit.hi_m)))
+
+    def _boxes(self, st: _Laser, cl: _Clusters, fit: BoxFit, hint: np.ndarray, sign_dir: np.ndarray | None,
+               track_of: np.ndarray | None, quant: np.ndarray, edges: tuple[np.ndarray, np.ndarray], inc: float,
+               first: tuple[BoxFit, _BoxFrame, np.ndarray | None] | None = None) -> Any:
         """Heading, class and completed box of every cluster.
 
         A cluster smaller than ``min_fit_extent_m`` cannot show its orientation: its box takes the hint's.
         Returns the boxes, headings, the class (the track's, with this frame's vote, where ``track_of`` names a
-        track) and the class this frame alone shows, as indices into ``_CLASSES``.
+        track) and the class this frame alone shows, as indices into ``_CLASSES``. Without ``track_of`` (the
+        first pass, before association; ``sign_dir`` unused) the boxes' centres ``(k, 2)`` and ``(fit, frame, refit
+        angles)``, which the second pass (``first``) reuses where its fit is the same.
         """
-        small = (np.fmax(fit.extent_m[:, 0], fit.extent_m[:, 1]) < self.min_fit_extent_m) & np.isfinite(hint)
+        e = fit.hi_m - fit.lo_m
+        small = (np.fmax(e[:, 0], e[:, 1]) < self.min_fit_extent_m) & np.isfinite(hint)
         if small.any():
-            fit = fit_boxes(points, labels, st.translation, n_clusters=len(fit),
-                            angle_rad=np.where(small, hint, fit.angle_rad))
-        heading, axis = box_heading(fit, hint, False, long_side_m=self.long_side_m)
+            fixed = np.where(small, hint, fit.angle_rad)[cl.present]
+            if first is not None and first[2] is not None and np.array_equal(first[2], fixed):
+                fit = first[0]  # the first pass refitted them at the same angles
+            else:
+                fit = _fit(cl, self._n_ang, self._step_rad, True, fixed)
+            e = fit.hi_m - fit.lo_m
+        else:
+            fixed = None
+        if first is not None and (first[0] is fit or np.array_equal(first[0].angle_rad, fit.angle_rad)):
+            frame = first[1]  # the same boxes as in the first pass
+        else:
+            frame = _box_frame(fit.angle_rad, fit.lo_m, fit.hi_m, st.translation, edges[0], edges[1], inc)
+        heading, axis = _unsigned_heading(fit.angle_rad, e, hint, self.long_side_m)
+        frame_cls = _class_index(np.where((axis == 1)[:, None], e[:, ::-1], e), self.people)
+        if track_of is None:
+            return _complete(frame, axis, self._profile[frame_cls], None, None, None, centre_only=True), (fit, frame,
+                                                                                                          fixed)
         with np.errstate(invalid="ignore"):
             flip = np.cos(heading - sign_dir) < 0  # NaN (no direction known): False
         heading = np.where(flip, np.where(heading <= 0, heading + math.pi, heading - math.pi), heading)
-        e = fit.extent_m
-        frame_cls = _class_index(np.where((axis == 1)[:, None], e[:, ::-1], e), self.people)
         cls = frame_cls.copy()
-        profile, dsig = self._profile[frame_cls], self._dsig[frame_cls]
-        if track_of is not None:
-            has = track_of >= 0
-            votes = st.votes[track_of[has]].copy()
-            votes[np.arange(votes.shape[0]), frame_cls[has]] += 1
-            cls[has] = self._track_class(votes, frame_cls[has])
-            profile, dsig = self._profile[cls], self._dsig[cls]
-            # A side the track has seen whole (close to the class's size) replaces the class prior.
-            dims = st.dims[track_of[has]]
-            with np.errstate(invalid="ignore"):
-                use = ((dims >= profile[has] - 3.0 * dsig[has]) & (dims <= profile[has] + 4.0 * dsig[has]))
-            profile[has] = np.where(use, dims, profile[has])
-            dsig[has] = np.where(use, np.minimum(dsig[has], 2.0 * self.sigma_m), dsig[has])
+        has = track_of >= 0
+        votes = st.votes[track_of[has]].copy()
+        votes[np.arange(votes.shape[0]), frame_cls[has]] += 1
+        cls[has] = self._track_class(votes, frame_cls[has])
+        profile, dsig = self._profile[cls], self._dsig[cls]
+        # A side the track has seen whole (close to the class's size) replaces the class prior.
+        dims = st.dims[track_of[has]]
+        with np.errstate(invalid="ignore"):
+            use = ((dims >= profile[has] - 3.0 * dsig[has]) & (dims <= profile[has] + 4.0 * dsig[has]))
+        profile[has] = np.where(use, dims, profile[has])
+        dsig[has] = np.where(use, np.minimum(dsig[has], 2.0 * self.sigma_m), dsig[has])
         # points off the fitted sides (a poor rectangle: clutter or a neighbour joined) make the centre less sure
-        sigma = np.hypot(self.sigma_m, np.nan_to_num(fit.rms_m))
-        boxes = complete_boxes(fit, st.translation, axis, profile, dims_sigma_m=dsig, sigma_m=sigma, quant_m=quant,
-                               edge_points_m=edges[0], edge_occluded=edges[1],
-                               angle_increment_rad=inc)
+        rms = fit.rms_m
+        sigma = np.hypot(self.sigma_m, rms if np.isfinite(rms).all() else np.nan_to_num(rms))
+        boxes = _complete(frame, axis, profile, dsig, sigma, quant)
         return boxes, heading, cls, frame_cls
 
     def _track_class(self, votes: np.ndarray, frame_cls: np.ndarray) -> np.ndarray:
         """Highest class with at least ``class_votes`` votes; the frame's class if none has enough."""
         enough = votes >= self.class_votes
-        best = len(_CLASSES) - 1 - np.argmax(enough[:, ::-1], axis=1)
+        best = len(_CLASSES) - 1 - enough[:, ::-1].argmax(axis=1)
         return np.where(enough.any(axis=1), best, frame_cls)
 
     @staticmethod
@@ -1168,14 +1354,25 @@ class LaserVehicleDetector:
 
     def _predict(self, st: _Laser, t_ns: int) -> None:
         if st.t_ns is not None and st.ids.size and t_ns > st.t_ns:
-            F, Q = kalman.cv_matrices((t_ns - st.t_ns) / 1e9, self.q)
-            st.x, st.P = kalman.predict(st.x, st.P, F, Q)
+            dt_ns = t_ns - st.t_ns
+            if self._cv[0] != dt_ns:  # scans mostly come at one period
+                F, Q = kalman.cv_matrices(dt_ns / 1e9, self.q)
+                F.setflags(write=False)
+                Q.setflags(write=False)
+                self._cv = (dt_ns, F, Q)
+            st.x, st.P = kalman.predict(st.x, st.P, self._cv[1], self._cv[2])
         st.t_ns = t_ns
 
     def _associate(self, st: _Laser, centres: np.ndarray) -> np.ndarray:
         if st.ids.size == 0 or centres.shape[0] == 0:
             return np.zeros((0, 2), np.int64)
-        cost = np.linalg.norm(st.x[:, None, 0:2] - centres[None, :, :], axis=2)
+        d = st.x[:, None, 0:2] - centres[None, :, :]
+        cost = np.sqrt((d * d).sum(axis=2))  # np.linalg.norm's sum of squares
+        allowed = cost <= self.gate_m  # NaN: not allowed
+        if (allowed.sum(axis=0) <= 1).all() and (allowed.sum(axis=1) <= 1).all():
+            # No track and no cluster has a rival within the gate: the optimal assignment is every gated pair
+            # (what the Hungarian solver returns then, sorted by track).
+            return np.argwhere(allowed).astype(np.int64)
         pairs, _, _ = hungarian(cost, gate=self.gate_m)
         return pairs
 
@@ -1197,15 +1394,12 @@ class LaserVehicleDetector:
         # A track's size is the largest it was seen at (a partial view only ever shows less), from clusters that
         # are rectangles (a neighbour joined to the cluster leaves points off the box's sides) and not larger
         # than the class allows.
-        plausible = (boxes.extent_m <= self._profile[cls] + 3.0 * self._dsig[cls]) & (
+        plausible = (boxes.extent_m <= self._max_extent[cls]) & (
             rms <= self.max_rms_m)[:, None]
         if ti.size:
-            n = st.ids.size
-            z = np.full((n, 2), np.nan)
-            R = np.broadcast_to(np.eye(2) * self.sigma_m**2, (n, 2, 2)).copy()
-            z[ti] = boxes.centre_m[di]
-            R[ti] = boxes.covariance_m2[di]
-            st.x, st.P = kalman.update(st.x, st.P, z, R=R)
+            x, P = kalman.update(st.x[ti], st.P[ti], boxes.centre_m[di], R=boxes.covariance_m2[di])
+            st.x, st.P = st.x.copy(), st.P.copy()  # the tracks without a detection keep their prediction
+            st.x[ti], st.P[ti] = x, P
             st.last_ns[ti] = t_ns
             st.hits[ti] += 1
             st.votes[ti, frame_cls[di]] += 1
@@ -1247,7 +1441,8 @@ class LaserVehicleDetector:
         probs = v / np.maximum(v.sum(axis=1, keepdims=True), 1.0)
         self._prune(st, t_ns)
         if st.ids.size > 1:  # two tracks on one vehicle (born from a split cluster): keep the stronger
-            close = np.linalg.norm(st.x[:, None, 0:2] - st.x[None, :, 0:2], axis=2) < self.merge_m
+            d = st.x[:, None, 0:2] - st.x[None, :, 0:2]
+            close = np.sqrt((d * d).sum(axis=2)) < self.merge_m  # np.linalg.norm's sum of squares
             np.fill_diagonal(close, False)
             h = st.hits
             weaker = (h[:, None] < h[None, :]) | ((h[:, None] == h[None, :]) & (st.ids[:, None] > st.ids[None, :]))
@@ -1255,19 +1450,22 @@ class LaserVehicleDetector:
         return ids, vel, probs
 
     def _detections(self, scan: LaserScan, labels: np.ndarray, n_points: np.ndarray, points: np.ndarray,
-                    boxes: CompletedBoxes, heading: np.ndarray, cls: np.ndarray, ids: np.ndarray, vel: np.ndarray,
-                    probs: np.ndarray) -> list[Detection]:
-        groups = np.split(points[np.argsort(labels, kind="stable")], np.cumsum(n_points)[:-1])
-        size_out = boxes.size_m + (self._dims[cls] - self._profile[cls])  # footprint: a bicycle is 0.6 m wide
+                    cl: _Clusters, boxes: CompletedBoxes, heading: np.ndarray, cls: np.ndarray, ids: np.ndarray,
+                    vel: np.ndarray, probs: np.ndarray) -> list[Detection]:
+        by_cluster = points if cl.ordered else points[np.argsort(labels, kind="stable")]
+        ends = n_points.cumsum().tolist()
+        groups = [by_cluster[a:b] for a, b in zip([0, *ends[:-1]], ends, strict=True)]
+        size_out = boxes.size_m + self._footprint_extra[cls]  # footprint: a bicycle is 0.6 m wide
         score = 1.0 - np.exp(-n_points / 8.0)
-        # fresh arrays the detections own (Detection.trusted takes them as they are, without copies)
-        centre = np.array(boxes.centre_m, np.float64)
-        cov = np.array(boxes.covariance_m2, np.float64)
-        box = np.column_stack([centre, size_out[:, 0], size_out[:, 1], heading]).astype(np.float64)
-        extent, from_prior = np.array(boxes.extent_m), np.array(boxes.from_prior)
-        vel = np.array(vel, np.float64)
-        track_ids = np.asarray(ids, np.int64).reshape(-1, 1).copy()
-        prob_rows = probs.tolist()
+        # The detections own their arrays (Detection.trusted takes them as they are, without copies): the boxes,
+        # velocities and ids are float64 / int64 arrays made for this scan that nothing else keeps.
+        centre, cov = boxes.centre_m, boxes.covariance_m2
+        box = np.empty((centre.shape[0], 5))
+        box[:, 0:2], box[:, 2:4], box[:, 4] = centre, size_out, heading
+        extent, from_prior = boxes.extent_m, boxes.from_prior
+        track_ids = ids.reshape(-1, 1)
+        prob_rows, scores, classes = probs.tolist(), score.tolist(), cls.tolist()
+        known = np.isfinite(vel[:, 0]).tolist()
         out = []
         for j in range(n_points.size):
             feats: dict[str, np.ndarray] = {
@@ -1277,10 +1475,10 @@ class LaserVehicleDetector:
                 "extent_m": extent[j],
                 "from_prior": from_prior[j],
             }
-            if np.isfinite(vel[j, 0]):
+            if known[j]:
                 feats["velocity_mps"] = vel[j]
-            out.append(Detection.trusted(scan.t_ns, scan.sensor, centre[j], cov[j], None, float(score[j]),
-                                         _CLASSES[cls[j]], dict(zip(_CLASSES, prob_rows[j], strict=True)), feats))
+            out.append(Detection.trusted(scan.t_ns, scan.sensor, centre[j], cov[j], None, scores[j],
+                                         _CLASSES[classes[j]], dict(zip(_CLASSES, prob_rows[j], strict=True)), feats))
         return out
 
 

@@ -138,6 +138,9 @@ class Expression:
         self.names: set[str] = set()
         self.zones: set[str] = set()
         self._check(self._tree, known, zone_calls)
+        self._fn = self._compile(self._tree)
+        # only arithmetic can warn (a comparison or abs of NaN does not)
+        self._arith = any(isinstance(node, ast.BinOp) for node in ast.walk(self._tree))
 
     def _fail(self, what: str) -> ConfigError:
         return ConfigError(f"{self.where}: {what} in {self.text!r}")
@@ -183,39 +186,78 @@ class Expression:
                  ) -> np.ndarray:
         """The condition for ``n`` entities, ``(n,) bool``; ``env`` maps names to ``(n,)`` arrays or numbers;
         ``zone(fn, arg)`` answers ``in_zone``/``in_zone_kind``."""
-        with np.errstate(invalid="ignore", divide="ignore"):
-            out = self._eval(self._tree, env, zone)
+        if self._arith:
+            with np.errstate(invalid="ignore", divide="ignore"):
+                out = self._fn(env, zone)
+        else:
+            out = self._fn(env, zone)
         return np.broadcast_to(np.asarray(out, dtype=bool), (n,)).copy()
 
-    def _eval(self, node: ast.AST, env: Mapping[str, Any], zone: Callable[[str, str], np.ndarray] | None) -> Any:
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        del state["_fn"]  # closures do not pickle: compiled again when loaded
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._fn = self._compile(self._tree)
+
+    def _compile(self, node: ast.AST) -> Callable[[Mapping[str, Any], Any], Any]:
+        """The checked tree as nested closures ``f(env, zone)`` (evaluated once per frame and rule: no tree walk
+        then). ``and``/``or`` evaluate every operand (element-wise, no short cut); comparisons chain with
+        ``and``."""
         if isinstance(node, ast.BoolOp):
-            vals = [np.asarray(self._eval(v, env, zone), dtype=bool) for v in node.values]
-            return functools.reduce(np.logical_and if isinstance(node.op, ast.And) else np.logical_or, vals)
+            parts = [self._compile(v) for v in node.values]
+            op = np.logical_and if isinstance(node.op, ast.And) else np.logical_or
+
+            def bool_op(env: Mapping[str, Any], zone: Any) -> Any:
+                vals = [np.asarray(f(env, zone), dtype=bool) for f in parts]
+                return functools.reduce(op, vals)
+
+            return bool_op
         if isinstance(node, ast.UnaryOp):
-            val = self._eval(node.operand, env, zone)
+            inner = self._compile(node.operand)
             if isinstance(node.op, ast.Not):
-                return np.logical_not(np.asarray(val, dtype=bool))
-            return np.negative(val) if isinstance(node.op, ast.USub) else val
+                return lambda env, zone: np.logical_not(np.asarray(inner(env, zone), dtype=bool))
+            if isinstance(node.op, ast.USub):
+                return lambda env, zone: np.negative(inner(env, zone))
+            return inner
         if isinstance(node, ast.Compare):
-            left, result = self._eval(node.left, env, zone), True
-            for op, comp in zip(node.ops, node.comparators, strict=True):
-                right = self._eval(comp, env, zone)
-                result = np.logical_and(result, _CMP[type(op)](left, right))
-                left = right
-            return result
+            first = self._compile(node.left)
+            chain = [(_CMP[type(op)], self._compile(comp)) for op, comp in zip(node.ops, node.comparators,
+                                                                               strict=True)]
+
+            def compare(env: Mapping[str, Any], zone: Any) -> Any:
+                left, result = first(env, zone), True
+                for cmp, f in chain:
+                    right = f(env, zone)
+                    result = np.logical_and(result, cmp(left, right))
+                    left = right
+                return result
+
+            return compare
         if isinstance(node, ast.BinOp):
-            return _BIN[type(node.op)](self._eval(node.left, env, zone), self._eval(node.right, env, zone))
+            fn, lhs, rhs = _BIN[type(node.op)], self._compile(node.left), self._compile(node.right)
+            return lambda env, zone: fn(lhs(env, zone), rhs(env, zone))
         if isinstance(node, ast.Name):
-            return env[node.id]
+            name = node.id
+            return lambda env, zone: env[name]
         if isinstance(node, ast.Constant):
-            return node.value
+            value = node.value
+            return lambda env, zone: value
         if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)):  # _check let nothing else in
             raise self._fail(f"{type(node).__name__} is not allowed")
         if node.func.id == "abs":
-            return np.abs(self._eval(node.args[0], env, zone))
-        if zone is None:
-            raise ConfigError(f"{self.where}: {node.func.id}() needs zones")
-        return zone(node.func.id, node.args[0].value)  # type: ignore[attr-defined]
+            arg = self._compile(node.args[0])
+            return lambda env, zone: np.abs(arg(env, zone))
+        fn_name, zone_arg, where = node.func.id, node.args[0].value, self.where  # type: ignore[attr-defined]
+
+        def zone_call(env: Mapping[str, Any], zone: Any) -> Any:
+            if zone is None:
+                raise ConfigError(f"{where}: {fn_name}() needs zones")
+            return zone(fn_name, zone_arg)
+
+        return zone_call
 
 
 # --------------------------------------------------------------------------------------------------
@@ -419,6 +461,7 @@ class SwitchingControl:
         self._window_ns = round(sm.speed_median_s * 1e9)
         self._timeout_ns = round(sm.track_timeout_s * 1e9)
         self._vehicle_classes = frozenset(rules.entity.vehicle_classes)
+        self._zone_axes: dict[int, tuple[int, np.ndarray | None]] = {}  # zone -> (its lane, else its main axis)
         self._slot_of: dict[int, int] = {}
         self._n_slots, self._k = 0, 16
         self._alloc(32)
@@ -438,10 +481,7 @@ class SwitchingControl:
 
         g = self.__dict__.get
         self._h_t = grow(g("_h_t"), _EMPTY_NS, (self._k,))
-        self._h_speed = grow(g("_h_speed"), np.nan, (self._k,))
-        self._h_vx = grow(g("_h_vx"), np.nan, (self._k,))
-        self._h_vy = grow(g("_h_vy"), np.nan, (self._k,))
-        self._h_smooth = grow(g("_h_smooth"), np.nan, (self._k,))
+        self._h_v = grow(g("_h_v"), np.nan, (4, self._k))  # speed, vx, vy, smoothed speed
         self._count = grow(g("_count"), np.int64(0))
         self.alive = grow(g("alive"), False)
         self.track_id = grow(g("track_id"), np.int64(-1))
@@ -468,12 +508,11 @@ class SwitchingControl:
         full = self._count >= k
         order[~full] = np.arange(k)
         rows = np.arange(self._n_slots)[:, None]
-        for name in ("_h_t", "_h_speed", "_h_vx", "_h_vy", "_h_smooth"):
-            arr = getattr(self, name)
-            fill = _EMPTY_NS if name == "_h_t" else np.nan
-            new = np.full((self._n_slots, 2 * k), fill, dtype=arr.dtype)
-            new[:, :k] = arr[rows, order]
-            setattr(self, name, new)
+        new_t = np.full((self._n_slots, 2 * k), _EMPTY_NS, dtype=np.int64)
+        new_t[:, :k] = self._h_t[rows, order]
+        new_v = np.full((self._n_slots, 4, 2 * k), np.nan)
+        new_v[:, :, :k] = np.take_along_axis(self._h_v, order[:, None, :], axis=2)
+        self._h_t, self._h_v = new_t, new_v
         self._count = np.minimum(self._count, k)
         self._k = 2 * k
 
@@ -494,7 +533,7 @@ class SwitchingControl:
     def _reset_slot(self, s: int, tid: int, t_ns: int) -> None:
         self._slot_of[tid] = s
         self.alive[s], self.track_id[s] = True, tid
-        self._h_t[s], self._h_speed[s], self._h_vx[s], self._h_vy[s], self._h_smooth[s] = _EMPTY_NS, *[np.nan] * 4
+        self._h_t[s], self._h_v[s] = _EMPTY_NS, np.nan
         self._count[s] = 0
         self.first_t_ns[s] = self.last_t_ns[s] = self.dwell_start_ns[s] = t_ns
         self.last_pos[s] = np.nan
@@ -526,11 +565,11 @@ class SwitchingControl:
     def entity_types(self, classes: Sequence[str], lengths_m: np.ndarray, laser_counts: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray]:
         """D7 entity types: ``(is_vehicle, is_group)``, ``(n,) bool`` each."""
-        cls = np.asarray(classes, dtype=object)
+        cls = list(classes)
         with np.errstate(invalid="ignore"):
-            group = (cls == "group") | (lengths_m > self.rules.entity.group_min_length_m) \
+            group = np.array([c == "group" for c in cls], bool) | (lengths_m > self.rules.entity.group_min_length_m) \
                 | (laser_counts >= self.rules.entity.group_min_laser_objects)
-        vehicle = np.fromiter((c in self._vehicle_classes for c in cls), bool, len(cls)) & ~group
+        vehicle = np.array([c in self._vehicle_classes for c in cls], bool) & ~group
         return vehicle, group
 
     # ------------------------------------------------------------------ one frame
@@ -543,17 +582,20 @@ class SwitchingControl:
         if self._last_t_ns is not None and t_ns < self._last_t_ns:
             raise ConfigError(f"t_ns: frames must come in time order ({t_ns} after {self._last_t_ns})")
         self._last_t_ns = t_ns
-        by_id = {s.track_id: s for s in states if np.isfinite(s.position_m).all()}
+        states = list(states)
+        finite = np.isfinite(np.array([s.position_m for s in states], dtype=np.float64).reshape(-1, 2)).all(axis=1)
+        by_id = {s.track_id: s for s, ok in zip(states, finite.tolist(), strict=True) if ok}
         sts = list(by_id.values())
         n = len(sts)
         ids = np.fromiter(by_id, dtype=np.int64, count=n)
         pos = np.array([s.position_m for s in sts], dtype=np.float64).reshape(n, 2)
         vel_given = np.array([s.velocity_mps for s in sts], dtype=np.float64).reshape(n, 2)
         score = np.array([s.score for s in sts], dtype=np.float64)
-        sensed = np.fromiter((bool(s.sensors) for s in sts), bool, n)
+        sensed = np.array([bool(s.sensors) for s in sts], dtype=bool)
         slots = self._slots_for(ids, t_ns)
-        self.names_sensors[slots] |= sensed
-        measured = sensed | ~self.names_sensors[slots]
+        names = self.names_sensors[slots] | sensed
+        self.names_sensors[slots] = names
+        measured = sensed | ~names
         sm = self.rules.smoothing
         # raw velocity: the track's own, else the position difference since its previous state
         dt_s = (t_ns - self.last_t_ns[slots]) * 1e-9
@@ -565,25 +607,29 @@ class SwitchingControl:
             vel = np.where(np.isfinite(vel_given).all(axis=1)[:, None], vel_given, diff_vel)
         # ring buffer of samples; grow it while the median window does not fit
         while True:
-            w = self._count[slots] % self._k
-            overwritten = self._h_t[slots, w]
-            if not np.any((self._count[slots] >= self._k) & (overwritten > t_ns - self._window_ns)):
+            count = self._count[slots]
+            w = count % self._k
+            if not ((count >= self._k) & (self._h_t[slots, w] > t_ns - self._window_ns)).any():
                 break
             self._grow_history()
         self._h_t[slots, w] = t_ns
-        self._h_vx[slots, w], self._h_vy[slots, w] = vel[:, 0], vel[:, 1]
-        self._h_speed[slots, w] = np.hypot(vel[:, 0], vel[:, 1])
-        self._count[slots] += 1
-        in_window = self._h_t[slots] > t_ns - self._window_ns
-        hist = np.stack([self._h_speed[slots], self._h_vx[slots], self._h_vy[slots]])
-        speed, vx_med, vy_med = _row_nanmedian(np.where(in_window[None], hist, np.nan))
-        v_med = np.column_stack([vx_med, vy_med])
-        self._h_smooth[slots, w] = speed
+        vx, vy = vel[:, 0], vel[:, 1]
+        self._h_v[slots, 0, w], self._h_v[slots, 1, w], self._h_v[slots, 2, w] = np.hypot(vx, vy), vx, vy
+        count += 1
+        self._count[slots] = count
+        h_t = self._h_t[slots]  # (n, k)
+        in_window = h_t > t_ns - self._window_ns
+        med = _row_nanmedian(np.where(in_window[:, None, :], self._h_v[slots, 0:3], np.nan))  # (n, 3)
+        speed = med[:, 0]
+        v_med = med[:, 1:3]
+        self._h_v[slots, 3, w] = speed
         # acceleration: change of the median speed since the oldest sample in the window
-        t_hist = np.where(in_window & np.isfinite(self._h_smooth[slots]), self._h_t[slots], np.iinfo(np.int64).max)
-        oldest = np.argmin(t_hist, axis=1)
-        span_s = (t_ns - self._h_t[slots, oldest]) * 1e-9
-        accel = np.where(span_s > 0, (speed - self._h_smooth[slots, oldest]) / np.maximum(span_s, 1e-9), 0.0)
+        smooth = self._h_v[slots, 3]
+        t_hist = np.where(in_window & np.isfinite(smooth), h_t, np.iinfo(np.int64).max)
+        oldest = t_hist.argmin(axis=1)
+        rows = np.arange(n)
+        span_s = (t_ns - h_t[rows, oldest]) * 1e-9
+        accel = np.where(span_s > 0, (speed - smooth[rows, oldest]) / np.maximum(span_s, 1e-9), 0.0)
         # geometry
         geo = self.geometry
         lane = geo.lane_index(pos)
@@ -597,15 +643,18 @@ class SwitchingControl:
         lane_cos = np.where(moving > _MIN_MOVING_MPS, np.einsum("nk,nk->n", unit, lane_dir), np.nan)
         lateral = np.einsum("nk,nk->n", v_med, outward)
         # time accumulators (a track's first state contributes no time)
-        seen = self._count[slots] > 1
+        seen = count > 1
         step_s = np.where(seen, dt_s, 0.0)
         self.time_on_road_s[slots] += np.where(on_road, step_s, 0.0)
         changed = np.any(zones != self.last_zones[slots], axis=1) & seen
         self.dwell_start_ns[slots[changed]] = t_ns
         self.last_zones[slots] = zones
         self.last_t_ns[slots], self.last_pos[slots] = t_ns, pos
-        lengths = np.array([np.nan if lengths_m is None else float(lengths_m.get(int(i), np.nan)) for i in ids])
-        lasers = np.array([0 if laser_counts is None else int(laser_counts.get(int(i), 0)) for i in ids])
+        id_list = ids.tolist()
+        lengths = np.full(n, np.nan) if lengths_m is None else \
+            np.array([float(lengths_m.get(i, np.nan)) for i in id_list], dtype=np.float64).reshape(n)
+        lasers = np.zeros(n, np.int64) if laser_counts is None else \
+            np.array([int(laser_counts.get(i, 0)) for i in id_list], dtype=np.int64).reshape(n)
         is_vehicle, is_group = self.entity_types([s.cls for s in sts], lengths, lasers)
         props = {
             "speed": speed, "heading": np.arctan2(v_med[:, 1], v_med[:, 0]), "acceleration": accel,
@@ -622,6 +671,18 @@ class SwitchingControl:
         return Frame(int(t_ns), slots, ids, pos, props, zones, lane, v_med)
 
     # ------------------------------------------------------------------ lane-zone groups
+    def _zone_axis(self, zone: int) -> tuple[int, np.ndarray | None]:
+        """The lane a zone lies along (:meth:`RoadGeometry.lane_of_zone`), and without one the principal axis of
+        its polygon; looked up once per zone (the geometry does not change)."""
+        got = self._zone_axes.get(zone)
+        if got is None:
+            lane, axis = self.geometry.lane_of_zone(zone), None
+            if lane < 0:
+                poly = self.geometry.zones[zone].polygon
+                axis = np.linalg.svd(poly - poly.mean(axis=0))[2][0]
+            got = self._zone_axes[zone] = (lane, axis)
+        return got
+
     def zone_groups(self, zones: np.ndarray, window_m: float, min_count: int) -> dict[str, Any]:
         """D7 scene-level groups: per lane zone, the vehicles of the window of ``window_m`` (along the zone's
         lane) with ``>= min_count`` vehicles and the lowest mean speed; when no window has that many, the
@@ -644,18 +705,16 @@ class SwitchingControl:
             if not inside.size:
                 members.append(np.zeros(0, np.int64))
                 continue
-            lane = self.geometry.lane_of_zone(z)
+            lane, axis = self._zone_axis(z)
             pos = self.latest_pos[inside]
             if lane >= 0:
-                s = self.latest_s[inside].copy()
+                s = self.latest_s[inside]
                 other = self.latest_lane[inside] != lane
                 if other.any():
                     s[other] = self.geometry.lanes[lane].coordinates(pos[other])[0]
             else:  # along the zone polygon's principal axis
-                poly = self.geometry.zones[z].polygon
-                axis = np.linalg.svd(poly - poly.mean(axis=0))[2][0]
                 s = pos @ axis
-            order = np.argsort(s, kind="stable")
+            order = s.argsort(kind="stable")
             s, sl = s[order], inside[order]
             v = self.latest_speed[sl]
             i, k = _best_window(s, v, window_m, min_count)
@@ -663,8 +722,10 @@ class SwitchingControl:
             count[j] = k - i
             mean_speed[j] = float(v[i:k].mean())
             centre[j] = self.latest_pos[sel].mean(axis=0)
-            score[j] = float(np.nanmean(self.latest_score[sel])) if np.isfinite(self.latest_score[sel]).any() \
-                else np.nan
+            sc = self.latest_score[sel]
+            if np.isfinite(sc).any():  # np.nanmean's sum and count
+                known = ~np.isnan(sc)
+                score[j] = float(np.where(known, sc, 0.0).sum() / known.sum())
             members.append(self.track_id[sel].copy())
         return {"count": count, "mean_speed": mean_speed, "density": count / (window_m / 1000.0),
                 "position_m": centre, "members": members, "score": score}
@@ -674,10 +735,12 @@ def _row_nanmedian(a: np.ndarray) -> np.ndarray:
     """Median over the last axis ignoring NaN (``NaN`` for an all-NaN row); a sort, much cheaper than
     :func:`numpy.nanmedian` on many short rows."""
     a = np.sort(a, axis=-1)  # NaN sort last
-    cnt = np.count_nonzero(~np.isnan(a), axis=-1)
-    lo = np.maximum((cnt - 1) // 2, 0)[..., None]
-    hi = np.maximum(cnt // 2, 0)[..., None]
-    med = 0.5 * (np.take_along_axis(a, lo, -1) + np.take_along_axis(a, hi, -1))[..., 0]
+    cnt = (~np.isnan(a)).sum(axis=-1)
+    rows = a.reshape(-1, a.shape[-1])
+    r = np.arange(rows.shape[0])
+    lo = np.maximum((cnt - 1) // 2, 0).reshape(-1)
+    hi = np.maximum(cnt // 2, 0).reshape(-1)
+    med = (0.5 * (rows[r, lo] + rows[r, hi])).reshape(cnt.shape)
     return np.where(cnt > 0, med, np.nan)
 
 
@@ -692,7 +755,9 @@ def _best_window(s: np.ndarray, v: np.ndarray, window_m: float, min_count: int) 
     i, k = _pairs(s.size)  # pairs i <= j, run [i, j]
     ok = s[k] - s[i] <= window_m
     i, k = i[ok], k[ok] + 1
-    csum = np.concatenate([[0.0], np.cumsum(v)])
+    csum = np.empty(v.size + 1)
+    csum[0] = 0.0
+    np.cumsum(v, out=csum[1:])
     size = k - i
     mean = np.round((csum[k] - csum[i]) / size, 6)  # equal speeds tie exactly: the larger window wins
     big = size >= min_count
@@ -945,7 +1010,7 @@ class SceneUnderstanding:
         clear = rule.clear(env, n, zone) if rule.clear is not None else ~cond
         started, ended = latch.step(frame.slots, frame.t_ns, cond, clear, frame.positions_m)
         out = []
-        row_of = {int(s): j for j, s in enumerate(frame.slots)}
+        row_of = {int(s): j for j, s in enumerate(frame.slots)} if started.size else {}
         for s in ended.tolist():
             out.append(self.log.close(int(latch.event[s]), int(latch.clear_start_ns[s]), frame.t_ns))
             latch.event[s] = -1
