@@ -249,3 +249,8 @@ def test_bad_traffic_settings_are_named():
             with pytest.raises(ConfigError, match=name):
                 TrafficParams(**{name: bad})
         assert getattr(TrafficParams.from_mapping({name: 3}), name) == 3
+
+
+def test_an_unknown_camera_setting_is_named(road):
+    with pytest.raises(ConfigError, match=r"traffic\.camera: unknown key\(s\) \['background_every'\]"):
+        track_traffic(road[0], params=TrafficParams(camera={"background_every": 4}))

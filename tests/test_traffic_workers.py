@@ -118,4 +118,48 @@ def test_bad_worker_settings_are_named():
     assert TrafficParams.from_mapping({"workers": 0}).workers == 0
     assert default_workers(0) == 0
     cores = len(os.sched_getaffinity(0))
-    assert default_workers(2) == (0 if cores < 2 else min(2, cores - 1))
+    for n in (1, 2, 5):  # never more workers than cameras, and a core is left to the main process
+        assert 0 <= default_workers(n) <= min(n, max(cores - 1, 0))
+        assert (default_workers(n) > 0) == (cores >= 2)
+
+
+def test_a_frame_that_cannot_be_sent_fails_at_once_and_the_workers_go_on():
+    import threading
+
+    with CameraWorkers({"cam": _echo}, 1) as pool:
+        with pytest.raises(TypeError, match="pickle"):
+            pool.submit("cam", threading.Lock())
+        job = pool.submit("cam", 7)
+        pool.wait(job)
+        assert job.detections == [7]
+    assert pool.total_cpu_s > 0  # the worker's own CPU time, reported at its exit
+
+
+def _state(pid: int) -> str:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0]
+    except FileNotFoundError:
+        return "gone"
+
+
+def _start_workers_and_die(conn):
+    pool = CameraWorkers({"cam": _echo}, 1)
+    conn.send(pool._procs[0].pid)
+    os._exit(0)  # killed without a chance to stop its workers
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/stat"), reason="needs /proc")
+def test_workers_leave_when_the_main_process_is_killed():
+    import time
+
+    ctx = mp.get_context("fork")
+    a, b = ctx.Pipe(duplex=False)
+    parent = ctx.Process(target=_start_workers_and_die, args=(b,))
+    parent.start()
+    worker = a.recv()
+    parent.join(timeout=10)
+    deadline = time.monotonic() + 10
+    while _state(worker) not in ("gone", "Z") and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert _state(worker) in ("gone", "Z"), "an orphaned worker must not wait for ever"

@@ -95,7 +95,7 @@ class BiasRun:
 
 def _transform_tree(rec: Recording) -> TransformTree:
     tree = TransformTree()
-    topics = _topic_types(rec)
+    topics = rec.topic_types()
     for tf_topic in ("/tf_static", "/tf"):
         if tf_topic in topics:
             for tf in rec.messages([tf_topic]):
@@ -103,17 +103,8 @@ def _transform_tree(rec: Recording) -> TransformTree:
     return tree
 
 
-def _topic_types(rec: Recording) -> dict[str, str]:
-    """Topic -> message type from the recording's connections (:meth:`Recording.topics` also counts the
-    messages, a pass over a ROS 2 bag that the bias does not need)."""
-    out: dict[str, str] = {}
-    for conn in rec.connections:
-        out.setdefault(conn.topic, conn.msgtype)
-    return dict(sorted(out.items()))
-
-
 def _camera_info(rec: Recording, camera: str) -> CameraInfo | None:
-    topics = _topic_types(rec)
+    topics = rec.topic_types()
     infos = [t for t, m in topics.items() if m == "sensor_msgs/msg/CameraInfo" and rec.sensor_of(t) == camera]
     return next((m for m in rec.messages(infos[:1]) if isinstance(m, CameraInfo)), None) if infos else None
 
@@ -125,7 +116,7 @@ def _colour_topic(topic: str) -> bool:
 
 def _image_topic(rec: Recording, camera: str, image_topic: str | None) -> str:
     """``image_topic`` (checked), else the camera's first colour image topic (raw preferred to compressed)."""
-    topics = _topic_types(rec)
+    topics = rec.topic_types()
     if image_topic is not None:
         msgtype = topics.get(image_topic)
         if msgtype not in IMAGE_TYPES:
@@ -144,7 +135,7 @@ def _image_topic(rec: Recording, camera: str, image_topic: str | None) -> str:
 def _setup(rec: Recording, camera: str, lasers: Sequence[str] | None, world_frame: str, cam2world: Any,
            laser2world: Mapping[str, Any] | None, image_topic: str | None = None,
            ) -> tuple[PinholeCamera, str, dict[str, np.ndarray], dict[str, str]]:
-    topics = _topic_types(rec)
+    topics = rec.topic_types()
     image_topic = _image_topic(rec, camera, image_topic)
     if cam2world is None:
         cam = camera_from_recording(rec, camera, camera, world_frame=world_frame)
@@ -284,7 +275,7 @@ class BiasInputs:
         truth_topic = f"/ground_truth/{self.camera_name}"
         with Recording(self.path) as rec:
             frame_topic = truth_topic if self.boxes == "truth" else self.image_topic
-            if frame_topic not in _topic_types(rec):
+            if frame_topic not in rec.topic_types():
                 raise RecordingError(f"{self.path}: no topic {frame_topic} for boxes={self.boxes!r}")
             fg = ForegroundModel(self.foreground)
             tracker = BlobTracker(self.tracker)

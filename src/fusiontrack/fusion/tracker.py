@@ -562,9 +562,9 @@ class FusionTracker:
         voters; a check without any is reopened at the next contact) gives its evidence, its confidence on its
         own track's box minus that on the other box. After ``check_frames`` images, a mean evidence beyond
         ``± check_margin`` keeps the identities or exchanges them (:meth:`_exchange`); the decided check waits for
-        the pair's next contact and is then run again (until the pair has been apart for ``check_s``): after an
-        exchange by the same voters (a classifier trained before the exchange decision may have learnt the
-        other person), else by every trained classifier of the pair. A track is exchanged at most once per step
+        the pair's next contact (the next step, while they stay close) and is then run again by the same voters
+        (a classifier first trained during the contact may have learnt the other person), until the pair has been
+        apart for ``check_s``. A track is exchanged at most once per step
         (a later check of it waits for the next image: its evidence was reset and this step's boxes carry the old
         ids); the states of this step are returned with the exchanges applied one after the other, as the laser
         tracker's ids were.
@@ -592,11 +592,10 @@ class FusionTracker:
                 voters = frozenset(tid for tid in pair if self.bank.is_trained(tid))
                 checks[pair] = _Check(t_ns, dist, t_ns, voters, split or (c is not None and c.split_seen))
                 continue
-            if c.decided:  # a new contact of a decided pair: checked again. After an exchange, by the same
-                # voters: a classifier trained between the contact and the exchange (e.g. of a track born beside
-                # the other) learnt the other person under its id; after a "keep", by every trained classifier.
-                voters = c.voters if c.exchanged else frozenset(tid for tid in pair if self.bank.is_trained(tid))
-                checks[pair] = _Check(t_ns, dist, c.near_ns, voters, split, exchanged=c.exchanged)
+            if c.decided:  # a decided pair still or again in contact: checked again, by the same voters (a
+                # classifier first trained during the contact, e.g. of a track born beside the other, may have
+                # learnt the other person under its id); new voters only once the check is dropped (check_s apart)
+                checks[pair] = _Check(t_ns, dist, c.near_ns, c.voters, split, exchanged=c.exchanged)
                 continue
             if split:  # an exchange, if any, most likely happened at the (last) split
                 c.swap_from_ns, c.split_seen = t_ns, True

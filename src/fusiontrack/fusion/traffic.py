@@ -176,8 +176,10 @@ class TrafficResult:
     def speed_x_real_time(self, parts: Sequence[str] = ("read", "laser_branch", "camera_branch", "dispatch",
                                                         "fusion_pf", "scene"), cpu: bool = False) -> float:
         """Recording seconds per processing second of the named parts (by default what a user of ``fusion_pf``
-        waits for: reading the recording, the branches, the particle filter and scene understanding); by the
-        wall clock, or by CPU time (``cpu``)."""
+        waits for in a serial run: reading the recording, the branches, the particle filter and scene
+        understanding); by the wall clock, or by CPU time (``cpu``). With camera workers the parts overlap (the
+        workers' camera branch runs while the main process works or waits in ``dispatch``): the wall-clock sum is
+        then no real time factor; :meth:`real_time_factor` is."""
         spent = sum((self.cpu_s if cpu else self.timings_s).get(p, 0.0) for p in parts)
         return self.duration_s / spent if spent > 0 else math.inf
 
@@ -355,6 +357,10 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
     wall_start, cpu_start = time.perf_counter(), time.process_time()
     worker_cpu, n_workers = 0.0, 0
     with Recording(path) as rec, opencv_threads(1):
+        unknown = sorted(set(p.camera) - {f.name for f in fields(VehicleDetectorParams)})
+        if unknown:
+            raise ConfigError(f"traffic.camera: unknown key(s) {unknown}; expected some of "
+                              f"{sorted(f.name for f in fields(VehicleDetectorParams))}")
         cam_params = VehicleDetectorParams(**dict(p.camera)) if p.camera else None
         laser, laser_topics, cams = traffic_branches(rec, roads, laser_params=p.laser, camera_params=cam_params,
                                                      time_source=time_source, calibration=calibration)
@@ -414,14 +420,17 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
             if kind == "note":
                 buffer.note(ev[1], ev[2])
                 return
+            if kind == "error":  # bad data in one message: skipped (counted and logged in recording order)
+                errors[ev[1]] = errors.get(ev[1], 0) + 1
+                log.warning("%s at %d ns: message skipped (%s)", ev[1], ev[2], ev[3])
+                return
             _, sensor, t_ns, every, dets = ev
             if isinstance(dets, CameraJob):
                 job = dets
                 cpu["camera_branch"] += job.cpu_s
                 timings["camera_branch"] += job.wall_s
                 if job.error is not None:
-                    errors[sensor] = errors.get(sensor, 0) + 1
-                    log.warning("%s at %d ns: message skipped (%s)", sensor, t_ns, job.error)
+                    run(("error", sensor, t_ns, job.error))
                     return
                 dets = job.detections
             counts[sensor] = counts.get(sensor, 0) + len(dets)
@@ -503,8 +512,7 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
                 except (ValueError, FloatingPointError) as err:  # bad data in one message: skip it, keep going
                     if part in clock:
                         stop(part)
-                    errors[msg.sensor] = errors.get(msg.sensor, 0) + 1
-                    log.warning("%s at %d ns: message skipped (%s)", msg.sensor, t, err)
+                    emit("error", msg.sensor, t, err)
                     continue
                 emit("put", msg.sensor, t, every, dets)
                 flush(block=False)
@@ -512,7 +520,7 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
         finally:
             if pool is not None:
                 pool.close()
-                worker_cpu = pool.cpu_s
+                worker_cpu = max(pool.total_cpu_s, pool.cpu_s)  # the whole workers (their frames if unknown)
         if scene is not None:
             scene_events = scene.events  # ended ones with their end, open ones with t_end_ns None
         for s, k in first_frame.items():

@@ -23,11 +23,15 @@ import contextlib
 import logging
 import multiprocessing as mp
 import os
+import pickle
+import queue
+import signal
 import time
 import traceback
 from collections import deque
 from collections.abc import Callable, Mapping
 from multiprocessing.connection import Connection, wait
+from multiprocessing.reduction import ForkingPickler
 from typing import Any
 
 log = logging.getLogger(__name__)
@@ -48,8 +52,8 @@ def default_workers(n_cameras: int) -> int:
         cores = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):
         cores = os.cpu_count() or 1
-    if n_cameras <= 0 or cores < 2 or not available():
-        return 0
+    if n_cameras <= 0 or cores < 2 or not available() or mp.current_process().daemon:
+        return 0  # (a daemonic process, e.g. a multiprocessing pool's worker, may not start processes)
     return max(1, min(n_cameras, cores - 1))
 
 
@@ -69,15 +73,41 @@ class CameraJob:
         self.wall_s = 0.0
 
 
-def _serve(jobs: Any, results: Connection, detectors: Mapping[str, Callable[[Any], list[Any]]]) -> None:
-    """A worker's loop: frames in, detections out, in order, until ``None``."""
+def _detach_from_parent() -> None:
+    """In a fresh worker: log to the process's own stderr (a handler of the parent, e.g. a live progress display's
+    console, may have been forked with its lock held by a thread that does not exist here) and leave Ctrl-C to the
+    main process, which stops the workers."""
+    import sys
+
+    root = logging.getLogger()
+    level = root.level
+    for h in list(root.handlers):
+        root.removeHandler(h)
+    handler = logging.StreamHandler(sys.__stderr__)
+    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s (camera worker): %(message)s"))
+    root.addHandler(handler)
+    root.setLevel(level)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _serve(jobs: Any, results: Connection, detectors: Mapping[str, Callable[[Any], list[Any]]],
+           parent: int) -> None:
+    """A worker's loop: frames in (pickled by the main process), detections out, in order, until ``None``; at the
+    end its whole CPU time. Leaves when the main process is gone (killed: nothing else would end the wait)."""
+    _detach_from_parent()
     while True:
-        item = jobs.get()
+        try:
+            item = jobs.get(timeout=1.0)
+        except queue.Empty:
+            if os.getppid() != parent:
+                return
+            continue
         if item is None:
+            results.send(("exit", None, None, time.process_time(), 0.0))
             break
-        sensor, image = item
         c0, w0 = time.process_time(), time.perf_counter()
         try:
+            sensor, image = pickle.loads(item)
             try:
                 out: tuple[Any, ...] = ("ok", detectors[sensor](image), None)
             except (ValueError, FloatingPointError) as err:  # bad data in one frame: the serial run skips it too
@@ -125,13 +155,14 @@ class CameraWorkers:
         self._procs: list[Any] = []
         self._pending: list[deque[CameraJob]] = []
         self.cpu_s = 0.0  # the workers' CPU time, summed over the frames
+        self.total_cpu_s = 0.0  # the workers' whole CPU time (unpickling, sending, start-up), known after close()
         try:
             for i in range(n):
                 mine = {s: detectors[s] for s in names if self._worker_of[s] == i}
                 jobs = ctx.Queue()
                 parent, child = ctx.Pipe(duplex=False)
-                proc = ctx.Process(target=_serve, args=(jobs, child, mine), name=f"fusiontrack-camera-{i}",
-                                   daemon=True)
+                proc = ctx.Process(target=_serve, args=(jobs, child, mine, os.getpid()),
+                                   name=f"fusiontrack-camera-{i}", daemon=True)
                 proc.start()
                 child.close()
                 self._jobs.append(jobs)
@@ -151,9 +182,12 @@ class CameraWorkers:
         i = self._worker_of[sensor]
         while len(self._pending[i]) >= self._max:
             self._receive(i)
+        # pickled here, not in the queue's feeder thread: a frame that cannot be sent fails now (not by a worker
+        # waiting for ever), the pixels are taken as they are now, and the cost is counted where it is paid
+        data = bytes(ForkingPickler.dumps((sensor, image)))
         job = CameraJob(sensor, i)
         self._pending[i].append(job)
-        self._jobs[i].put((sensor, image))
+        self._jobs[i].put(data)
         return job
 
     def poll(self) -> None:
@@ -190,12 +224,18 @@ class CameraWorkers:
                     jobs.put(None)
         deadline = time.monotonic() + 10.0
         for conn, proc in zip(self._conns, self._procs, strict=False):
-            while proc.is_alive() and time.monotonic() < deadline:
-                try:  # a worker blocked on sending a result must be able to finish
+            while time.monotonic() < deadline:  # results still on their way, then the worker's CPU at its exit
+                try:  # (a worker blocked on sending a result must be able to finish)
                     if conn.poll(0.05):
-                        conn.recv()
+                        msg = conn.recv()
+                        if msg[0] == "exit":
+                            self.total_cpu_s += msg[3]
+                            break
+                    elif not proc.is_alive() and not conn.poll(0):
+                        break
                 except (EOFError, OSError):
-                    proc.join(timeout=1)
+                    break
+            proc.join(timeout=1)
             if proc.is_alive():
                 log.warning("%s did not stop; terminated", proc.name)
                 proc.terminate()

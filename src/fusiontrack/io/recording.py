@@ -206,7 +206,7 @@ class Recording:
         out: dict[str, str] = {}
         for conn in self.connections:
             out.setdefault(conn.topic, conn.msgtype)
-        return out
+        return dict(sorted(out.items()))  # in topic order, as topics()
 
     def topics(self) -> dict[str, TopicInfo]:
         """Every topic with its type, count and log-time span (read from the index where there is one; for a
