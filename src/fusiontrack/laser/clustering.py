@@ -108,6 +108,23 @@ class ScanClusters:
         return int(self.start.size)
 
 
+def a8_runs(r: np.ndarray, angle_increment_rad: float, c0_m: float
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A8's runs of a scan's ranges ``r`` (float64, beam order; checked by the callers): the valid beams (finite,
+    > 0) ``idx``, their ranges, whether each starts a run (an invalid beam or a jump beyond the threshold before
+    it) and its run number. Works on the valid beams only (few when a foreground subset is passed; NaN arithmetic
+    is slow); the links by the law of cosines, no trigonometry per beam."""
+    idx = np.flatnonzero(np.isfinite(r))
+    idx = idx[r[idx] > 0]
+    rv = r[idx]
+    r0, r1 = rv[:-1], rv[1:]
+    gap2 = r0 * r0 + r1 * r1 - (2.0 * math.cos(angle_increment_rad)) * (r0 * r1)
+    th = c0_m + breakpoint_c1(angle_increment_rad) * np.minimum(r0, r1)
+    starts = np.ones(idx.size, dtype=bool)
+    starts[1:] = (np.diff(idx) != 1) | (gap2 > th * th)
+    return idx, rv, starts, np.cumsum(starts, dtype=np.intp) - 1
+
+
 def cluster_scan(ranges_m: Any, angle_min_rad: float, angle_increment_rad: float, *, c0_m: float = 0.20,
                  n_min: int = 2) -> ScanClusters:
     """Nearest-neighbour clustering of one scan with a range-adaptive threshold (seed 000 Eq. 2; A8).
@@ -139,17 +156,7 @@ def cluster_scan(ranges_m: Any, angle_min_rad: float, angle_increment_rad: float
         raise ValueError(f"angle_increment_rad: expected a finite non-zero angle, got {angle_increment_rad}")
     r = np.asarray(ranges_m, dtype=np.float64).reshape(-1)
     n = r.size
-    # Work on the valid beams only (few when a foreground subset is passed; NaN arithmetic is slow).
-    idx = np.flatnonzero(np.isfinite(r))
-    idx = idx[r[idx] > 0]
-    rv = r[idx]
-    r0, r1 = rv[:-1], rv[1:]
-    # Law of cosines: no trigonometry per beam for the links.
-    gap2 = r0 * r0 + r1 * r1 - (2.0 * math.cos(angle_increment_rad)) * (r0 * r1)
-    th = c0_m + breakpoint_c1(angle_increment_rad) * np.minimum(r0, r1)
-    starts = np.ones(idx.size, dtype=bool)
-    starts[1:] = (np.diff(idx) != 1) | (gap2 > th * th)  # an invalid beam or a jump ends a cluster
-    cid = np.cumsum(starts, dtype=np.intp) - 1
+    idx, rv, starts, cid = a8_runs(r, angle_increment_rad, c0_m)
     size = np.bincount(cid)  # a cluster is a run of valid, linked beams
     keep = size >= n_min
     new_id = np.where(keep, np.cumsum(keep, dtype=np.intp) - 1, -1)

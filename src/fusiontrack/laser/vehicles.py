@@ -59,7 +59,7 @@ import numpy as np
 
 from fusiontrack.errors import ConfigError
 from fusiontrack.laser.background import BeamBackground, InitMethod
-from fusiontrack.laser.clustering import breakpoint_c1
+from fusiontrack.laser.clustering import a8_runs
 from fusiontrack.laser.detector import planar_pose
 from fusiontrack.tracking import kalman
 from fusiontrack.tracking.association import hungarian
@@ -238,15 +238,7 @@ def segment_scan(ranges_m: Any, angle_min_rad: float, angle_increment_rad: float
         raise ValueError(f"angle_increment_rad: expected a finite non-zero angle, got {angle_increment_rad}")
     r = np.asarray(ranges_m, dtype=np.float64).reshape(-1)
     # A8 runs as cluster_scan(..., n_min=1) finds them (without the centroids, bearings and widths it also computes)
-    beams = np.flatnonzero(np.isfinite(r))
-    beams = beams[r[beams] > 0]
-    rv = r[beams]
-    r0, r1 = rv[:-1], rv[1:]
-    gap2 = r0 * r0 + r1 * r1 - (2.0 * math.cos(angle_increment_rad)) * (r0 * r1)
-    th = c0 + breakpoint_c1(angle_increment_rad) * np.minimum(r0, r1)
-    first = np.ones(beams.size, dtype=bool)
-    first[1:] = (np.diff(beams) != 1) | (gap2 > th * th)  # an invalid beam or a jump ends a cluster
-    run = first.cumsum(dtype=np.intp) - 1  # A8 cluster of each valid beam
+    beams, rv, first, run = a8_runs(r, angle_increment_rad, c0)
     n_points = np.bincount(run).astype(np.int64)
     k = n_points.size
     start = beams[first].astype(np.int64)
