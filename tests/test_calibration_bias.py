@@ -85,15 +85,7 @@ def estimator(rho: float, **kw: object) -> HorizontalBiasEstimator:
 def run(est: HorizontalBiasEstimator, people: list[np.ndarray], n: int, *, box_noise_px: float = 0.0,
         rng: np.random.Generator | None = None) -> np.ndarray:
     """``n`` frames of the same people; the bias after each, degrees."""
-    out = []
-    for k in range(n):
-        t = (10 + k) * 40_000_000
-        est.observe_scan(scan_of(people, t))
-        boxes = boxes_of(people)
-        if box_noise_px:
-            boxes = boxes + rng.normal(0.0, box_noise_px, (len(people), 1)) * [1, 0, 1, 0]
-        out.append(est.update(t, boxes).bias_rad)
-    return np.degrees(out)
+    return np.degrees(_biases_and_targets(est, people, n, box_noise_px, rng)[0])
 
 
 # ---- A6 ------------------------------------------------------------------------------------------------
@@ -247,7 +239,8 @@ def test_noisy_bias_error_after_convergence():
 
 def _biases_and_targets(est: HorizontalBiasEstimator, people: list[np.ndarray], n: int, box_noise_px: float = 0.0,
                         rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Bias after each of ``n`` frames and each frame's target ``b + ē`` (A10), radians."""
+    """Bias after each of ``n`` frames and each frame's target ``b + ē`` (A10; NaN when no person was used),
+    radians."""
     bias, target = [], []
     for k in range(n):
         t = (10 + k) * 40_000_000
@@ -257,9 +250,8 @@ def _biases_and_targets(est: HorizontalBiasEstimator, people: list[np.ndarray], 
             boxes = boxes + rng.normal(0.0, box_noise_px, (len(people), 1)) * [1, 0, 1, 0]
         before = est.bias_rad
         step = est.update(t, boxes)
-        assert step.n_used == 1
         bias.append(step.bias_rad)
-        target.append(before + step.mean_residual_rad)
+        target.append(before + step.mean_residual_rad if step.n_used else np.nan)
     return np.array(bias), np.array(target)
 
 
@@ -269,6 +261,7 @@ def test_stop_rule_stops_once_the_bias_has_caught_up_with_its_targets():
     # 3 (0.9)^(n-19) (1 - 0.9^19), first falls to 0.1 degree at n = 50.
     tol = math.radians(0.1)
     bias, target = _biases_and_targets(estimator(0.1), [person_at(200, 5.0)], 60)
+    assert np.isfinite(target).all()  # every frame's person was used
     np.testing.assert_allclose(target, B_TRUE, atol=math.radians(1e-3))
     first = next(n for n in range(1, 61) if bias_settled(bias[:n], target[:n], 20, tol))
     assert first == math.ceil(math.log(0.1 / 3.0) / math.log(0.9)) == 33
@@ -288,6 +281,7 @@ def test_stop_rule_on_noisy_boxes_stops_within_the_tolerance_of_the_true_bias():
         rng = np.random.default_rng(seed)
         bias, target = _biases_and_targets(estimator(0.1), [person_at(200, 5.0)], 120,
                                            FX * math.tan(math.radians(0.3)), rng)
+        assert np.isfinite(target).all()
         first = next(n for n in range(20, 121) if bias_settled(bias[:n], target[:n], 20, tol))
         assert abs(bias[first - 1] - B_TRUE) <= tol
     rng = np.random.default_rng(0)
