@@ -82,18 +82,12 @@ def _echo(image):
     return [image]
 
 
-def test_a_bug_in_a_worker_is_raised_in_the_main_process():
-    with CameraWorkers({"cam": _raise_type_error}, 1) as pool:
+@pytest.mark.parametrize(("branch", "message"), [(_raise_type_error, "TypeError: a bug in the branch"),
+                                                  (_die, "ended unexpectedly")])
+def test_a_bug_in_a_worker_or_its_death_is_raised_in_the_main_process_not_waited_for(branch, message):
+    with CameraWorkers({"cam": branch}, 1) as pool:
         job = pool.submit("cam", 1)
-        with pytest.raises(RuntimeError, match="TypeError: a bug in the branch"):
-            pool.wait(job)
-    assert not mp.active_children()
-
-
-def test_a_worker_that_dies_is_reported_not_waited_for():
-    with CameraWorkers({"cam": _die}, 1) as pool:
-        job = pool.submit("cam", 1)
-        with pytest.raises(RuntimeError, match="ended unexpectedly"):
+        with pytest.raises(RuntimeError, match=message):
             pool.wait(job)
     assert not mp.active_children()
 
