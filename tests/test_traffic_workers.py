@@ -82,13 +82,27 @@ def _echo(image):
     return [image]
 
 
-@pytest.mark.parametrize(("branch", "message"), [(_raise_type_error, "TypeError: a bug in the branch"),
-                                                  (_die, "ended unexpectedly")])
-def test_a_bug_in_a_worker_or_its_death_is_raised_in_the_main_process_not_waited_for(branch, message):
+class _Unpicklable(Exception):
+    def __init__(self, what, lock):  # two arguments: pickling rebuilds it with one, and fails
+        super().__init__(what)
+        self.lock = lock
+
+
+def _raise_unpicklable(image):
+    raise _Unpicklable("a bug with a lock", object())
+
+
+@pytest.mark.parametrize(("branch", "raised", "message"), [
+    (_raise_type_error, TypeError, "a bug in the branch"),
+    (_raise_unpicklable, RuntimeError, "_Unpicklable: a bug with a lock"),
+    (_die, RuntimeError, "ended unexpectedly")])
+def test_a_bug_in_a_worker_or_its_death_is_raised_in_the_main_process_not_waited_for(branch, raised, message):
     with CameraWorkers({"cam": branch}, 1) as pool:
         job = pool.submit("cam", 1)
-        with pytest.raises(RuntimeError, match=message):
+        with pytest.raises(raised, match=message) as info:
             pool.wait(job)
+    if branch is _raise_type_error:  # the worker's exception, of its own type, its traceback chained as the cause
+        assert "_raise_type_error" in str(info.value.__cause__)
     assert not mp.active_children()
 
 

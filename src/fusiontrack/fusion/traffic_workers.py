@@ -8,7 +8,9 @@ share the rest. On a machine with several cores the camera branches run beside t
   them is pickled, and their state stays in the worker);
 * the main process sends each frame to its camera's worker as soon as it has read it, and reads on;
 * the results come back per worker in the order the frames were sent: a frame's detections, or the error that
-  made the branch skip it, with the worker's CPU and wall time for it.
+  made the branch skip it, with the worker's CPU and wall time for it;
+* a bug in a worker is raised in the main process as the worker's own exception (a :class:`RuntimeError` if it
+  cannot be pickled), with the worker's traceback as its cause; a worker that dies is reported, not waited for.
 
 :func:`~fusiontrack.fusion.traffic.track_traffic` keeps every effect on the fusion's state in recording order (it
 queues them until the frames before them are back), so the tracks are those of the serial run, bit for bit.
@@ -90,6 +92,24 @@ def _detach_from_parent() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+class _RemoteTraceback(Exception):
+    """The traceback of an exception raised in a camera worker, chained as the cause of its copy in the main
+    process (as :mod:`concurrent.futures` does)."""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+def _picklable(exc: BaseException) -> bytes | None:
+    """``exc`` pickled, if it survives the round trip (a custom exception may not); None otherwise."""
+    try:
+        data = pickle.dumps(exc)
+        pickle.loads(data)
+    except Exception:
+        return None
+    return data
+
+
 def _serve(jobs: Any, results: Connection, detectors: Mapping[str, Callable[[Any], list[Any]]],
            parent: int) -> None:
     """A worker's loop: frames in (pickled by the main process), detections out, in order, until ``None``; at the
@@ -113,8 +133,8 @@ def _serve(jobs: Any, results: Connection, detectors: Mapping[str, Callable[[Any
             except (ValueError, FloatingPointError) as err:  # bad data in one frame: the serial run skips it too
                 out = ("ok", [], f"{type(err).__name__}: {err}")
             results.send((*out, time.process_time() - c0, time.perf_counter() - w0))
-        except BaseException:  # a bug (or a result that cannot be sent): the main process raises it
-            results.send(("crash", traceback.format_exc(), None, 0.0, 0.0))
+        except BaseException as exc:  # a bug (or a result that cannot be sent): the main process raises it
+            results.send(("crash", traceback.format_exc(), _picklable(exc), 0.0, 0.0))
             break
     results.close()
 
@@ -210,6 +230,9 @@ class CameraWorkers:
             raise RuntimeError(f"camera worker {i} ({self._procs[i].name}) ended unexpectedly (exit code "
                                f"{self._procs[i].exitcode})") from None
         if status == "crash":
+            remote = _RemoteTraceback(f"camera worker {i} failed:\n{payload}")
+            if error is not None:  # the worker's own exception, of its own type, with the worker's traceback
+                raise pickle.loads(error) from remote
             raise RuntimeError(f"camera worker {i} failed:\n{payload}")
         job = self._pending[i].popleft()
         job.detections, job.error, job.cpu_s, job.wall_s, job.done = payload, error, cpu, wall, True
