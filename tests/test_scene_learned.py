@@ -164,3 +164,26 @@ def test_labels_and_retraining(work) -> None:
     pred, _ = model.predict(X)
     for c in ("stopped_vehicle", "road_leaving", "jam"):  # its own training run is learnt
         assert np.mean(pred[y == c] == c) > 0.8, c
+
+
+def test_a_stop_seen_only_in_the_trackers_extrapolation_raises_no_alarm() -> None:
+    """A window whose states a sensor mostly did not confirm shows how the tracker coasts, not what the vehicle
+    does: the same stop, confirmed in every frame, alarms; confirmed in one frame of four, it does not."""
+    road = parse_road_geometry(ROAD, "test road")
+    t = np.arange(0.0, 40.0, 0.1)
+    v = np.where(t < 14.0, 15.0, np.maximum(15.0 - 2.5 * (t - 14.0), 0.0))
+    x = -250.0 + np.concatenate([[0.0], np.cumsum((v[1:] + v[:-1]) / 2 * 0.1)])
+
+    def events(sensed_every: int, **options) -> list:
+        scene = LearnedSceneUnderstanding(road, **options)
+        for k, (ti, xi, vi) in enumerate(zip(t, x, v, strict=True)):
+            sensors = ("laser_0",) if ti < 14.0 or k % sensed_every == 0 else ()
+            scene.update(round(ti * 1e9), [TrackState(round(ti * 1e9), "test", 1, (xi, -1.75), (vi, 0.0),
+                                                      cls="car", sensors=sensors)])
+        return [e.kind for e in scene.events]
+
+    assert events(1) == ["stopped_vehicle"]
+    assert events(4) == []
+    assert events(4, min_measured=0.0) == ["stopped_vehicle"]  # the forest alone would alarm
+    with pytest.raises(ConfigError, match="min_measured"):
+        LearnedSceneUnderstanding(road, min_measured=1.5)

@@ -11,12 +11,13 @@ speed learnt that instead of the leaving (it missed a vehicle that left at 10 m/
 tracker output is its jitter.
 
 Events have the interface of the rules (:class:`LearnedSceneUnderstanding` with ``update(t_ns, track_states)``,
-:func:`detect_events_learned`): a track's ``stopped_vehicle`` / ``road_leaving`` / ``wrong_way`` event starts
-once the forest says so with confidence >= ``p_min`` for ``on_s`` (0.25 s: two evaluations), and ends once it has not
-for ``off_s``; a ``jam`` event of a lane zone starts once >= ``jam_min_tracks`` of its vehicles are classified
-``jam``. ``t_ns`` is the first positive evaluation, ``attributes["alarm_t_ns"]`` the alarm. A track's event that
-starts where an event of the same kind is going on or ended moments ago continues it (``rejoin_m``,
-``rejoin_s``): one incident, one event, also when the tracker loses a stopped vehicle and finds it again.
+:func:`detect_events_learned`): a track's ``stopped_vehicle`` / ``road_leaving`` / ``wrong_way`` event starts once the
+forest says so with confidence >= ``p_min`` for ``on_s`` (0.25 s: two evaluations), in windows that a sensor mostly
+confirmed (``min_measured``), and ends once it has not for ``off_s``; a ``jam`` event of a lane zone starts once >=
+``jam_min_tracks`` of its vehicles are classified ``jam``. ``t_ns`` is the first positive evaluation,
+``attributes["alarm_t_ns"]`` the alarm. A track's event that starts where an event of the same kind is going on or ended
+moments ago continues it (``rejoin_m``, ``rejoin_s``): one incident, one event, also when the tracker loses a stopped
+vehicle and finds it again.
 
 Training (:func:`train_scene_classifier`, ``python -m fusiontrack.scene.learned``): simulated ``road`` runs,
 (a) without sensors, the agents as perfect tracks (``agents.csv``), and (b) with sensors, the ``traffic``
@@ -85,6 +86,7 @@ FEATURES = (
     "nb_count_last", "nb_count_mean", "nb_speed_last", "nb_speed_mean", "history_s",
     "measured_frac", "measured_last",
 )
+_MEASURED_FRAC = FEATURES.index("measured_frac")
 MODEL_FILE = "scene_classifier.json"
 FORMAT = "fusiontrack-forest-1"
 NEIGHBOUR_RANGE_M = 25.0
@@ -419,6 +421,10 @@ class LearnedSceneUnderstanding:
         0.25 s: on the held-out tracked runs (seeds 14-16) the alarms came 0.3-0.5 s sooner than every 0.5 s, with
         no false alarm more, for ~20 ms of CPU per recording second.
     p_min : float — least confidence of a positive evaluation
+    min_measured : float — least share of a window's states that a sensor confirmed (``measured_frac``) for a
+        positive evaluation. A window made mostly of the tracker's extrapolation shows how the tracker coasts, not
+        how the vehicle behaves (the D8 rules count only measured states for road leaving likewise). 0.5: a
+        majority.
     on_s, off_s : float — a positive class must hold ``on_s`` to start an event, be absent ``off_s`` to end it
     jam_min_tracks : int — vehicles of a lane zone classified ``jam`` that make a jam
     rejoin_m, rejoin_s : float — a track's new event lying within ``rejoin_m`` of an event of the same kind
@@ -433,11 +439,12 @@ class LearnedSceneUnderstanding:
 
     def __init__(self, geometry: RoadGeometry, model: SceneClassifier | None = None, rules: SceneRules | None = None,
                  *, window_s: float = 5.0, period_s: float = 0.25, min_history_s: float = 1.0, p_min: float = 0.5,
-                 on_s: float = 0.25, off_s: float = 2.0, jam_min_tracks: int = 3, rejoin_m: float = 3.0,
-                 rejoin_s: float = 10.0, sensor: str = "scene_learned", collect: bool = False) -> None:
-        if not 0 <= p_min <= 1 or on_s < 0 or off_s < 0 or jam_min_tracks < 1:
-            raise ConfigError(f"p_min in [0, 1], on_s >= 0, off_s >= 0, jam_min_tracks >= 1; got {p_min}, {on_s}, "
-                              f"{off_s}, {jam_min_tracks}")
+                 min_measured: float = 0.5, on_s: float = 0.25, off_s: float = 2.0, jam_min_tracks: int = 3,
+                 rejoin_m: float = 3.0, rejoin_s: float = 10.0, sensor: str = "scene_learned",
+                 collect: bool = False) -> None:
+        if not (0 <= p_min <= 1 and 0 <= min_measured <= 1) or on_s < 0 or off_s < 0 or jam_min_tracks < 1:
+            raise ConfigError(f"p_min and min_measured in [0, 1], on_s >= 0, off_s >= 0, jam_min_tracks >= 1; got "
+                              f"{p_min}, {min_measured}, {on_s}, {off_s}, {jam_min_tracks}")
         if not (rejoin_m >= 0 and rejoin_s >= 0 and math.isfinite(rejoin_m) and math.isfinite(rejoin_s)):
             raise ConfigError(f"rejoin_m, rejoin_s: expected finite values >= 0, got {rejoin_m}, {rejoin_s}")
         self.rejoin_m, self._rejoin_ns = float(rejoin_m), round(rejoin_s * 1e9)
@@ -451,7 +458,7 @@ class LearnedSceneUnderstanding:
         self.control = SwitchingControl(geometry, rules if rules is not None else default_rules())
         self.windows = FeatureWindows(window_s, period_s, min_history_s)
         self.log = EventLog(sensor)
-        self.p_min, self.jam_min_tracks = float(p_min), int(jam_min_tracks)
+        self.p_min, self.min_measured, self.jam_min_tracks = float(p_min), float(min_measured), int(jam_min_tracks)
         on_ns, off_ns = round(on_s * 1e9), round(off_s * 1e9)
         self._kinds = ("stopped_vehicle", "road_leaving", "wrong_way")
         self._latches = {k: Latch(on_ns, 1, off_ns, 1) for k in self._kinds}
@@ -499,7 +506,7 @@ class LearnedSceneUnderstanding:
         if model is None:  # only in collect mode, handled above
             return out
         label, prob = model.predict(X)
-        confident = prob >= self.p_min
+        confident = (prob >= self.p_min) & (X[:, _MEASURED_FRAC] >= self.min_measured)
         is_vehicle = self.control.latest_vehicle[due]
         self._label[due] = np.where(confident & is_vehicle, label, "none")
         row_of = {int(s): j for j, s in enumerate(frame.slots)}
