@@ -9,9 +9,14 @@ Tables, all measured in this process, one run after another (no parallel load on
 2. situation detection of the PF tracker against the simulator's truth events
    (:func:`fusiontrack.sim.situations.situation_events`, scored by :func:`fusiontrack.eval.situation_accuracy`
    with the identity map of the MOTA evaluation): per kind, true events, detected, false alarms; events
-   (true and detected) that start in the first 3 s, while the backgrounds are learnt, are left out. Twice: as
-   labelled, and with the same persistence rules on both sides (``TRUTH_PERSISTENCE``: a split undone by a
-   re-merge of the same people within 0.5 s is dropped with that merge; correlated gaps up to 0.4 s bridged);
+   (true and detected) that start in the first 3 s, while the backgrounds are learnt, are left out. Against two
+   truths: the *centre-distance* truth (:func:`~fusiontrack.sim.situations.situation_events`: merged below
+   0.6 m, correlated below 0.8 m between true body centres) and the *measurement* truth
+   (:func:`~fusiontrack.sim.situations.segment_situation_events` on
+   :func:`~fusiontrack.eval.situations.segment_frames`: the detector's segments, each point attributed to the
+   agent its beam hit). Each twice: as labelled, and with the same persistence rules on both sides
+   (``TRUTH_PERSISTENCE``: a split undone by a re-merge of the same people within 0.5 s is dropped with that
+   merge; correlated gaps up to 0.4 s bridged);
 3. how the scanners see pairs of people by centre distance: the share of frames in which the detector puts both
    in one two-feet segment, or gives each a segment of its own (points attributed to the nearest true person
    within 0.5 m). The situation truth calls a pair merged below 0.6 m; where the simulated pairs walk
@@ -21,7 +26,7 @@ Tables, all measured in this process, one run after another (no parallel load on
    annotators' 0.75 m threshold, on the annotated scans (annotations after scan k belong to scan k).
 
     .venv/bin/python benchmarks/laser_people.py [--seeds 0 1 2] [--crowd-seconds 60] [--groups-seconds 40]
-        [--scaling 5 10 20 40 80] [--scaling-seconds 20] [--skip-scaling] [--skip-outdoor]
+        [--scaling 5 10 20 40 80] [--scaling-seconds 20] [--skip-scaling] [--skip-outdoor] [--skip-kalman]
 """
 
 from __future__ import annotations
@@ -39,12 +44,19 @@ from rich.console import Console
 from rich.table import Table
 
 from fusiontrack.eval import evaluate_floor, situation_accuracy
+from fusiontrack.eval.situations import segment_frames
 from fusiontrack.io.recording import Recording
 from fusiontrack.io.sync import synchronize, with_time
 from fusiontrack.laser.detector import detector_for_recording
 from fusiontrack.sim.scenario import load_scenario
 from fusiontrack.sim.simulator import Simulation, simulate
-from fusiontrack.sim.situations import EVENT_KINDS, TRUTH_PERSISTENCE, drop_undone_splits, situation_events
+from fusiontrack.sim.situations import (
+    EVENT_KINDS,
+    TRUTH_PERSISTENCE,
+    drop_undone_splits,
+    segment_situation_events,
+    situation_events,
+)
 from fusiontrack.tracking.tracker import track_recording
 from fusiontrack.types import GroundTruth, LaserScan
 
@@ -113,6 +125,9 @@ def run_sim(name: str, seconds: float, seed: int, tmp: Path, settings: dict[str,
     t_warm = gt[0].t_ns + round(WARMUP_S * 1e9)
     truth_events = situation_events(gt, bounds)
     truth_persist = situation_events(gt, bounds, **TRUTH_PERSISTENCE)
+    seg_frames = segment_frames(path, clock_corrections_ns=corrections)
+    seg_events = segment_situation_events(seg_frames, bounds)
+    seg_persist = segment_situation_events(seg_frames, bounds, **TRUTH_PERSISTENCE)
     n_scans = sum(sim.messages.get(c.name, 0) for c in scenario.config.lasers)
     out: dict[str, Any] = {"mean_present": sim.mean_present, "scans": n_scans}
     if pairs:
@@ -136,6 +151,11 @@ def run_sim(name: str, seconds: float, seed: int, tmp: Path, settings: dict[str,
             out[trk]["situations_persist"] = situation_accuracy(
                 [e for e in truth_persist if e.t_ns >= t_warm], [e for e in held if e.t_ns >= t_warm],
                 id_map=m.id_map)
+            for key, truth, det in (("segments", seg_events, events), ("segments_persist", seg_persist, held)):
+                out[trk][key] = situation_accuracy([e for e in truth if e.t_ns >= t_warm],
+                                                   [e for e in det if e.t_ns >= t_warm], id_map=m.id_map)
+            out[trk]["events"], out["truth"] = events, {"centre": truth_events, "segments": seg_events}
+            out["id_map"] = m.id_map
     return out
 
 
@@ -171,12 +191,14 @@ def main() -> None:
     parser.add_argument("--scaling-seconds", type=float, default=20.0)
     parser.add_argument("--skip-scaling", action="store_true")
     parser.add_argument("--skip-outdoor", action="store_true")
+    parser.add_argument("--skip-kalman", action="store_true", help="track with the PF only")
     args = parser.parse_args()
     console = Console(width=200)
     t_start = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
-        results = {(name, seed): run_sim(name, secs, seed, tmp, pairs=True)
+        trackers = ("pf",) if args.skip_kalman else ("pf", "kalman")
+        results = {(name, seed): run_sim(name, secs, seed, tmp, pairs=True, trackers=trackers)
                    for name, secs in (("crowd", args.crowd_seconds), ("groups", args.groups_seconds))
                    for seed in args.seeds}
 
@@ -186,14 +208,14 @@ def main() -> None:
                     "IDSW", "FP", "FN", "track ms med / p95", "detect+track ms med / p95"):
             table.add_column(col, justify="left" if col in ("scenario", "tracker") else "right")
         for (name, seed), r in results.items():
-            for trk in ("pf", "kalman"):
+            for trk in trackers:
                 m, w = r[trk]["m"], r[trk]["warm"]
                 table.add_row(name, str(seed), f"{r['mean_present']:.1f}", "PF (ours)" if trk == "pf" else "CV Kalman",
                               f"{m.mota:.3f}", f"{w.mota:.3f}", f"{m.idf1:.3f}", f"{m.hota:.3f}", str(m.id_switches),
                               str(m.fp), str(m.fn), "{:.2f} / {:.2f}".format(*r[trk]["track_ms"]),
                               "{:.2f} / {:.2f}".format(*r[trk]["total_ms"]))
         for name in ("crowd", "groups"):
-            for trk in ("pf", "kalman"):
+            for trk in trackers:
                 rs = [r[trk] for (n, _), r in results.items() if n == name]
 
                 def mean(key: str, attr: str, rs: list = rs) -> str:
@@ -206,18 +228,24 @@ def main() -> None:
                               f"{np.mean([x['total_ms'][0] for x in rs]):.2f}", style="bold")
         console.print(table)
 
-        sit = Table(title="situation detection, PF tracker vs the simulator's truth events (detected / true, "
+        sit = Table(title="situation detection, PF tracker vs the simulator's truth events (centre distance: true "
+                          "body centres; measurement: the detector's segments and the agents each beam hit) "
+                          "(detected / true, "
                           f"false alarms), summed over the seeds, after the first {WARMUP_S:g} s; 'persistence': "
                           f"split undone by a re-merge within {TRUTH_PERSISTENCE['split_hold_s']:g} s dropped and "
                           f"correlated gaps up to {TRUTH_PERSISTENCE['correlated_gap_s']:g} s bridged, on both sides",
                     header_style="bold")
         sit.add_column("scenario")
+        sit.add_column("truth")
         sit.add_column("rules")
         for kind in EVENT_KINDS:
             sit.add_column(kind, justify="right")
         for name in ("crowd", "groups"):
-            for key, rules in (("situations", "as labelled"), ("situations_persist", "persistence")):
-                row = [name, rules]
+            for key, truth, rules in (("situations", "centre distance", "as labelled"),
+                                      ("situations_persist", "centre distance", "persistence"),
+                                      ("segments", "measurement", "as labelled"),
+                                      ("segments_persist", "measurement", "persistence")):
+                row = [name, truth, rules]
                 for kind in EVENT_KINDS:
                     scores = [r["pf"][key][kind] for (n, _), r in results.items() if n == name]
                     true, hit = sum(s.true for s in scores), sum(s.detected for s in scores)

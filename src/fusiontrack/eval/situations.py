@@ -25,25 +25,31 @@ A detection ``d`` may match a true event ``e`` when all of these hold:
 
 Among the allowed pairs the matching maximises the number of matches, then minimises the summed
 start-time offsets (Hungarian algorithm), so the counts do not depend on the order of the inputs.
+
+:func:`segment_frames` builds the measurement-level truth of a simulated recording
+(:class:`fusiontrack.sim.situations.SegmentFrame`, for
+:func:`~fusiontrack.sim.situations.segment_situation_events`): it replays the laser detector the tracker uses
+over the same scans and attributes every segment point to the agent its beam hit.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from ..sim.situations import EVENT_KINDS
+from ..sim.situations import EVENT_KINDS, SegmentFrame, load_laser_hits
 from ..types import Event
 from .errors import EvaluationError
 
 if TYPE_CHECKING:
     from rich.table import Table
 
-__all__ = ["SituationScore", "match_events", "situation_accuracy", "situation_table"]
+__all__ = ["SituationScore", "match_events", "segment_frames", "situation_accuracy", "situation_table"]
 
 _FOREVER = 2**62  # "still going on"; far from int64 overflow when differences are taken
 
@@ -222,3 +228,104 @@ def situation_table(scores: Mapping[str, SituationScore], *, title: str | None =
                       "-" if np.isnan(s.recall) else f"{100 * s.recall:.1f}",
                       "-" if np.isnan(s.precision) else f"{100 * s.precision:.1f}")
     return table
+
+
+def segment_frames(path: str | Path, *, clock_corrections_ns: Mapping[str, int] | None = None,
+                   detector_params: Mapping[str, Any] | None = None) -> list[SegmentFrame]:
+    """The measurement-level situation truth of a simulated recording, one frame per tracker step.
+
+    Replays :func:`fusiontrack.tracking.tracker.track_recording`'s detection loop (the same laser topics, clock
+    corrections, :func:`~fusiontrack.laser.detector.detector_for_recording` detector and step times: every
+    distinct scan time) and, per step, attributes each point of each two-feet segment to its scanner's beam
+    (the point's bearing in the scanner frame) and the beam to the agent it hit
+    (:func:`fusiontrack.sim.situations.load_laser_hits`, matched to the scan by its header stamp). The true
+    agents are those of the ``/ground_truth`` frame nearest in time; returns of agents it does not list are left
+    out.
+
+    Parameters
+    ----------
+    path : str or Path
+        Recording folder written by :func:`fusiontrack.sim.simulator.simulate`.
+    clock_corrections_ns, detector_params :
+        As for :func:`~fusiontrack.tracking.tracker.track_recording` (use the same values as the tracked run).
+
+    Returns
+    -------
+    list of SegmentFrame
+
+    Raises
+    ------
+    fusiontrack.errors.RecordingError
+        The recording has no per-beam truth (simulated before the simulator wrote it), or it does not match
+        the scans.
+    """
+    from ..errors import RecordingError
+    from ..io.recording import LASERSCAN, Recording
+    from ..io.sync import synchronize
+    from ..laser.detector import detector_for_recording, planar_pose
+
+    hits = load_laser_hits(path)
+    corrections = {k: int(v) for k, v in (clock_corrections_ns or {}).items()}
+    frames: list[SegmentFrame] = []
+    with Recording(path) as rec:
+        lasers = [t for t, i in rec.topics().items() if i.msgtype == LASERSCAN]
+        if not lasers:
+            raise EvaluationError(f"{path}: no sensor_msgs/LaserScan topic")
+        gt = list(rec.messages(["/ground_truth"]))
+        if not gt:
+            raise EvaluationError(f"{path}: no /ground_truth messages")
+        gt_t = np.array([g.t_ns for g in gt], dtype=np.int64)
+        detector, poses = detector_for_recording(rec, lasers, detector_params=detector_params)
+        names = detector.scanners
+        pose = {name: planar_pose(poses[name]) for name in names}
+        rows = {name: dict(zip(h["stamp_ns"].tolist(), range(h["stamp_ns"].size), strict=True))
+                for name, h in hits.items()}
+        latest: dict[str, tuple[int, np.ndarray, float, float]] = {}  # sensor -> (t_ns, hit ids, angle0, step)
+
+        def step(t_ns: int) -> None:
+            g = gt[int(np.argmin(np.abs(gt_t - t_ns)))]
+            ids = np.asarray(g.ids, np.int64)
+            points, seg = detector.segments(t_ns)
+            _, owner = detector.foreground_points(t_ns)
+            m = len(seg)
+            returns = np.zeros((m, ids.size), np.int64)
+            if m and ids.size:
+                agent = np.full(len(points), -1, np.int64)
+                for s_idx, name in enumerate(names):
+                    sel = np.flatnonzero(owner == s_idx)
+                    if sel.size == 0 or name not in latest:
+                        continue
+                    _, hit_ids, angle0, inc = latest[name]
+                    rot, trans = pose[name]
+                    local = (points[sel] - trans) @ rot
+                    bearing = np.arctan2(local[:, 1], local[:, 0])
+                    beam = np.rint(np.mod(bearing - angle0, 2 * np.pi) / inc).astype(np.int64)
+                    ok = (beam >= 0) & (beam < hit_ids.size)
+                    agent[sel[ok]] = hit_ids[beam[ok]]
+                col = np.searchsorted(np.sort(ids), agent)
+                order = np.argsort(ids)
+                col = order[np.clip(col, 0, ids.size - 1)]
+                ok = (seg.labels >= 0) & (agent >= 0) & (ids[col] == agent)
+                np.add.at(returns, (seg.labels[ok], col[ok]), 1)
+            frames.append(SegmentFrame(t_ns, ids, np.asarray(g.positions_m, np.float64).reshape(-1, 2),
+                                       seg.centres_m if m else np.zeros((0, 2)), returns))
+
+        pending: int | None = None
+        for scan in synchronize(rec.messages(lasers), clock_corrections_ns=corrections):
+            if pending is not None and scan.t_ns != pending:
+                step(pending)
+            detector.update(scan)
+            prev = latest.get(scan.sensor)
+            if prev is None or scan.t_ns >= prev[0]:  # the detector keeps the newest scan per scanner
+                stamp = scan.t_ns - corrections.get(scan.sensor, 0)
+                row = rows.get(scan.sensor, {}).get(stamp)
+                if row is None or hits[scan.sensor]["hit_ids"].shape[1] != scan.n_beams:
+                    raise RecordingError(f"{path}: the scan of {scan.sensor} stamped {stamp} ns ({scan.n_beams} "
+                                         f"beams) has no row in ground_truth/laser_hits_{scan.sensor}.npz: the "
+                                         f"per-beam truth does not belong to this recording")
+                hit_ids = hits[scan.sensor]["hit_ids"][row]
+                latest[scan.sensor] = (scan.t_ns, hit_ids, scan.angle_min_rad, scan.angle_increment_rad)
+            pending = scan.t_ns
+        if pending is not None:
+            step(pending)
+    return frames

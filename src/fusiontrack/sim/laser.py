@@ -290,11 +290,24 @@ class LaserSim:
         -------
         (n_beams,) float32, metres.
         """
+        return self.ranges_and_hits(snapshot, rng)[0]
+
+    def ranges_and_hits(self, snapshot: AgentSnapshot,
+                        rng: np.random.Generator | int | None) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`ranges` and the ``hit_ids`` of the same noise-free :meth:`cast` (which agent each beam hit).
+
+        Returns
+        -------
+        ranges_m : (n_beams,) float32
+            As :meth:`ranges` (the same draws from ``rng``).
+        hit_ids : (n_beams,) int64
+            As :meth:`cast`: agent id, ``-1`` for the static world or no hit.
+        """
         rng = np.random.default_rng(rng)
-        range_m, _ = self.cast(snapshot)
+        range_m, hit_ids = self.cast(snapshot)
         noisy = range_m + rng.normal(0.0, self.spec.range_noise_m, self.spec.n_beams)
         np.maximum(noisy, 0.0, out=noisy)
-        return noisy.astype(np.float32)
+        return noisy.astype(np.float32), hit_ids
 
     def scan(self, t_ns: int, snapshot: AgentSnapshot, rng: np.random.Generator | int | None,
              stamp_ns: int | None = None) -> LaserScan:
@@ -317,7 +330,13 @@ class LaserSim:
             ``sensor`` and ``frame_id`` are ``spec.name``; ``scan_time_s = 1 / rate``, ``time_increment_s = 0``
             (no motion distortion is simulated).
         """
+        return self.scan_and_hits(t_ns, snapshot, rng, stamp_ns)[0]
+
+    def scan_and_hits(self, t_ns: int, snapshot: AgentSnapshot, rng: np.random.Generator | int | None,
+                      stamp_ns: int | None = None) -> tuple[LaserScan, np.ndarray]:
+        """:meth:`scan` and, per beam, the agent id it hit (``-1``: static world or nothing; :meth:`cast`)."""
         spec = self.spec
+        ranges_m, hit_ids = self.ranges_and_hits(snapshot, rng)
         return LaserScan(
             t_ns=int(t_ns if stamp_ns is None else stamp_ns),
             sensor=spec.name,
@@ -326,10 +345,10 @@ class LaserSim:
             angle_increment_rad=spec.angle_increment_rad,
             range_min_m=spec.range_min_m,
             range_max_m=spec.range_max_m,
-            ranges_m=self.ranges(snapshot, rng),
+            ranges_m=ranges_m,
             time_increment_s=0.0,
             scan_time_s=1.0 / spec.timing.rate_hz,
-        )
+        ), hit_ids
 
     def points_world(self, ranges_m: Any) -> np.ndarray:
         """Beam end points in the world, ``(n_beams, 2)`` metres.

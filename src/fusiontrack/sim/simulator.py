@@ -16,7 +16,9 @@ Output (``simulate(scenario, out)``): ``out/`` is an ordinary rosbag2 MCAP recor
 * ``/ground_truth/steps``: heel strikes (one GroundTruth per step, attribute ``foot``).
 
 and ``out/ground_truth/`` holds the same truth as CSV (agents, per-camera boxes, steps, incidents,
-situation events) plus ``incidents.jsonl`` and ``world.json`` (area bounds, walls, pillars, boxes, roads).
+situation events) plus ``incidents.jsonl``, ``world.json`` (area bounds, walls, pillars, boxes, roads) and
+``laser_hits_<laser>.npz`` (per written scan and beam, the id of the agent the beam hit: the measurement-level
+truth of :mod:`fusiontrack.sim.situations`).
 
 Sensor messages carry header stamps on the sensor's clock (true time + clock offset + jitter) and
 are logged at true time + latency, so clock correction and reordering are exercised exactly as
@@ -205,6 +207,7 @@ class Simulation:
         gt_frames: list[AgentSnapshot] = []
         camera_truth: dict[str, list[tuple[int, int, AgentSnapshot, Any]]] = defaultdict(list)
         gt_dir = output / "ground_truth"
+        self._laser_hits: dict[str, list[tuple[int, int, np.ndarray]]] = defaultdict(list)
         with RecordingWriter(output) as writer:
             for tf in self.sensor_transforms():
                 writer.write(tf)
@@ -228,6 +231,7 @@ class Simulation:
             seconds["ground truth"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         self._write_csv(gt_dir, gt_frames, situations, camera_truth)
+        self._write_laser_hits(gt_dir)
         seconds["ground truth"] += time.perf_counter() - t0
         result.messages = dict(counts)
         result.dropped = {name: sum(c.lost for c in caps) for name, caps in captures.items()}
@@ -254,7 +258,9 @@ class Simulation:
         if cap.lost:
             return False
         if isinstance(sim, LaserSim):
-            writer.write(sim.scan(cap.t_ns, snap, rng, stamp_ns=cap.stamp_ns), log_t_ns=cap.log_ns)
+            scan, hit_ids = sim.scan_and_hits(cap.t_ns, snap, rng, stamp_ns=cap.stamp_ns)
+            writer.write(scan, log_t_ns=cap.log_ns)
+            self._laser_hits[name].append((cap.t_ns, cap.stamp_ns, hit_ids.astype(np.int32)))
         elif isinstance(sim, CameraSim):
             out = sim.render((cap.t_ns - T0_NS) / 1e9, snap, rng)
             writer.write(sim.camera_info(cap.stamp_ns), log_t_ns=cap.log_ns)
@@ -295,6 +301,22 @@ class Simulation:
                            tuple(KIND_NAMES[k] for k in snap.kinds),
                            {"feet_m": snap.feet_m, "heading_rad": snap.heading_rad, "size_m": snap.size_m,
                             "group_id": snap.group_ids, "gait_phase_rad": snap.gait_phase_rad, "situation": codes})
+
+    def _write_laser_hits(self, folder: Path) -> None:
+        """``laser_hits_<laser>.npz`` per scanner: which agent each beam of each written scan hit.
+
+        Arrays ``t_ns`` (n,) true scan time, ``stamp_ns`` (n,) header stamp of the ``/<laser>/scan`` message,
+        ``hit_ids`` (n, n_beams) agent id of the noise-free cast, ``-1`` = static world or no return (int16, or
+        int32 when an id does not fit). Read with :func:`fusiontrack.sim.situations.load_laser_hits`.
+        """
+        folder.mkdir(parents=True, exist_ok=True)
+        for laser in self.lasers:
+            rows = self._laser_hits.get(laser.spec.name, [])
+            hits = (np.stack([r[2] for r in rows]) if rows else np.zeros((0, laser.n_beams), np.int64))
+            dtype = np.int16 if hits.size == 0 or hits.max() <= np.iinfo(np.int16).max else np.int32
+            np.savez_compressed(folder / f"laser_hits_{laser.spec.name}.npz",
+                                t_ns=np.array([r[0] for r in rows], np.int64),
+                                stamp_ns=np.array([r[1] for r in rows], np.int64), hit_ids=hits.astype(dtype))
 
     def _write_csv(self, folder: Path, frames: list[AgentSnapshot], situations: list[np.ndarray],
                    camera_truth: dict[str, list]) -> None:

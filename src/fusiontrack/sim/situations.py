@@ -1,9 +1,19 @@
 """Seed 001's tracking situations labelled from ground truth (ALGORITHMS.md B6, B7, B15, B19).
 
+Two truths, both compared with the tracker's situation switches (seed 001 Table II: true counts of
+correlated, merge/split and appear/disappear situations):
+
+* **centre-distance truth** (:func:`label_situations`, :func:`situation_events`): from the true body centres
+  alone (below);
+* **measurement truth** (:func:`segment_situations`, :func:`segment_situation_events`): from what the scanners
+  returned — which agent each beam hit (the simulator's ``laser_hits_<laser>.npz``) and the two-feet segments
+  the detector made of those returns (see "Measurement truth" at the end of this docstring).
+
+Centre-distance truth
+---------------------
 Every agent listed in a frame gets one :class:`~fusiontrack.types.Situation` per frame, from the true
 body centres (``AgentSnapshot.position_m``) alone, so the labels say what a laser tracker built as in
-B4-B7 *should* see; the evaluation compares the tracker's own situation switches against them
-(seed 001 Table II: true counts of correlated, merge/split and appear/disappear situations).
+B4-B7 *should* see.
 
 Definitions (distances between body centres; ``h = 0.40 m`` is B4's mean-shift bandwidth):
 
@@ -41,6 +51,71 @@ back with the same id is treated as present from its first to its last frame.
 
 :func:`situation_events` turns the labels into seed 001's events (:class:`~fusiontrack.types.Event`):
 ``merge``, ``split``, ``correlated`` (one per agent and episode), ``appear`` and ``disappear``; see there.
+
+Measurement truth
+-----------------
+Seed 001 defines the situations by the association of targets and measurements (B6, B7): a merge is two
+targets whose only detection is one segment, a correlated target has more than one detection in its gate, an
+appearing detection on the edge belongs to no target. Its Table II truth was "obtained in a semi-automatic way
+(system detection labeling)", i.e. from what the laser detections showed. Here the same rules are applied to
+the *true* owners of the detector's segments. Per frame (one per tracker step: every scan time) a
+:class:`SegmentFrame` holds the detector's segments (the same :class:`~fusiontrack.laser.LaserPeopleDetector`
+the tracker uses, on the same scans) and, per segment and agent, how many of its points are returns of beams
+that hit that agent (noise-free cast of the simulator: exact attribution, no distance rule). Then:
+
+* agent ``a`` is a *member* of segment ``j`` when ``j`` holds at least ``min_returns = 3`` of its returns
+  (B4's ``n_min``: as many as a segment of its own needs); ``a`` is *seen* when it is a member of a segment,
+  *hidden* otherwise (occluded, out of reach, or not yet separated from the background), and has a segment of
+  its *own* when some segment has it as the only member;
+* ``merged`` — seen, no segment of its own, and sharing a segment with another such agent. Merged sets are the
+  connected components of "share a segment" among those agents (B7 rule 1: ``r_j = 2`` and every target
+  finding ``j`` has ``c = 1``: each member's only detection is the shared one);
+* ``correlated`` — seen, not merged, and either (a) a member of a segment shared with someone (the other has a
+  segment of its own: its target finds two detections, ``c = 2``, B7 rule 3 and its completion in
+  :mod:`fusiontrack.tracking.situations`), or (b) B6's gate about its true centre (circle of radius
+  ``gate_m = 2h = 0.8 m``) holds the centres of at least two segments that have members, at least one of
+  which holds another agent (``c_k = 2`` because of another person, not because its own two legs fell into
+  two segments). Segments of no agent (clutter, background errors) are left out of the gate count;
+* ``appearing`` — within ``appear_window_s = 1 s`` after an *appear* event of the agent (below);
+  ``disappearing`` — within ``appear_window_s`` before a *disappear* event; ``noncorrelated`` otherwise;
+  precedence as in the centre-distance truth. Hidden agents get the empty label ``""``. These per-frame
+  labels are raw (what each scan shows); the events below ask states to persist.
+
+Events (the same kinds and :class:`~fusiontrack.types.Event` layout as :func:`situation_events`):
+
+``merge`` / ``split``
+    Per pair of agents, the frames in which both are seen, each "together" (in one merged set) or "apart".
+    The pair's state changes when the other state holds in every such frame for ``min_state_s = 0.1 s``
+    (B7's ``N_confirm = 3`` frames at 25 Hz: a detection must persist that long to count; two friends side
+    by side are one segment in one scan and two in the next, and a one-scan blip is no situation a labeller
+    would mark); the change apart -> together is a pair merge, together -> apart a pair split, dated by the
+    first frame of the new state. Frames in which both are seen more than ``max_gap_s = 1 s`` apart (B7's
+    ``N_miss``: a target hidden longer is gone) start the pair afresh, as does its first such frame: the first
+    state that holds is taken as it is, without an event. A merge event is a merged set of the frame that
+    confirms a pair merge (``track_ids`` = the set); a split event is the merged set the pair was last
+    confirmed in (``track_ids`` = that set). An agent hidden while beside a friend and seen again still beside
+    it makes no event; seen first inside a shared segment (entering together) makes no merge (seed 001: "when a
+    nonmerged target splits, we do not consider this to be a merge/split condition").
+``correlated``
+    Per agent, over the frames in which it is seen, its state (correlated, merged, or neither) changes with
+    the same ``min_state_s`` hysteresis and ``max_gap_s`` reset as a pair's; one event per run of the correlated
+    state, from its first frame to its last correlated frame (``attributes["partners"]`` = the agents it
+    interacted with). Hidden frames (up to ``max_gap_s``) neither end nor extend a run.
+``appear``
+    B7 rule 6, per segment: the first frame in which the agent is seen, when that segment's centre lies within
+    ``edge_m = 0.5 m`` of the area's boundary; ``t_end_ns`` = the start of its first sighting that lasts
+    ``min_state_s`` (consecutive frames in which it is seen: B7 confirms a new detection after ``N_confirm``
+    frames, and a person glimpsed in a doorway is confirmable only once in full view). An agent never seen that
+    long makes no appear event. Agents first seen in the same segment make one event
+    (``track_ids`` = those agents): one detection, one new target. First seen in the interior (in view from
+    the start, or hidden while entering) is no appear event.
+``disappear``
+    B7 rule 5 (which, unlike rule 6, waits for nothing): the last frame in which the agent is seen, when it then
+    leaves (it is not listed in the last frame of the sequence) and the centre of its segment then lies within
+    ``edge_m`` of the boundary; ``t_ns = t_end_ns`` = that frame.
+
+The optional persistence rules of :func:`situation_events` (``split_hold_s``, ``correlated_gap_s``,
+``min_correlated_s``) apply on top, as there.
 """
 
 from __future__ import annotations
@@ -63,10 +138,16 @@ __all__ = [
     "EVENT_KINDS",
     "EVENT_MERGE",
     "EVENT_SPLIT",
+    "HIDDEN",
     "SITUATION_DTYPE",
     "TRUTH_PERSISTENCE",
+    "SegmentAnalysis",
+    "SegmentFrame",
     "drop_undone_splits",
     "label_situations",
+    "load_laser_hits",
+    "segment_situation_events",
+    "segment_situations",
     "situation_counts",
     "situation_events",
 ]
@@ -206,28 +287,8 @@ def situation_events(frames: Sequence[Any], bounds_m: Any, *, d_correlated: floa
         events = drop_undone_splits(events, split_hold_s)
 
     # correlated episodes, per agent
-    runs: dict[int, tuple[int, int, set[int], np.ndarray, int]] = {}  # id -> (start, last, partners, pos, k)
-    gap_ns, min_ns = round(correlated_gap_s * 1e9), round(min_correlated_s * 1e9)
-    for k in range(a.t_ns.size):
-        t = int(a.t_ns[k])
-        listed = set(a.ids[k].tolist())
-        for agent in [i for i in runs if i not in listed]:  # not listed (left the area): the run ends
-            _close_run(events, agent, runs.pop(agent), sensor, min_ns)
-        for j, agent in enumerate(a.ids[k].tolist()):
-            run = runs.get(agent)
-            ended = run is not None and run[4] != k - 1 and t - run[1] > gap_ns  # a gap too long to bridge
-            if a.labels[k][j] != Situation.CORRELATED:  # a merge always ends the run (as in the tracker)
-                if ended or (run is not None and (gap_ns == 0 or a.labels[k][j] == Situation.MERGED)):
-                    _close_run(events, agent, runs.pop(agent), sensor, min_ns)
-                continue
-            if ended:
-                _close_run(events, agent, runs.pop(agent), sensor, min_ns)
-                run = None
-            partners = set(a.partners[k][j].tolist())
-            runs[agent] = ((t, t, partners, a.positions[k][j], k) if run is None
-                           else (run[0], t, run[2] | partners, run[3], k))
-    for agent, run in runs.items():
-        _close_run(events, agent, run, sensor, min_ns)
+    _correlated_runs(events, a.t_ns, a.ids, a.positions, a.labels, a.partners, sensor, correlated_gap_s,
+                     min_correlated_s)
 
     # appear / disappear
     window_ns = round(appear_window_s * 1e9)
@@ -256,7 +317,457 @@ def situation_counts(events: Sequence[Event]) -> dict[str, int]:
     return counts
 
 
+# ---- measurement truth ---------------------------------------------------------------------------
+
+HIDDEN = ""
+"""Label of an agent that is listed but has no returns in any segment this frame (measurement truth)."""
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class SegmentFrame:
+    """The detector's segments at one tracker step and which agents' returns they hold (measurement truth).
+
+    Attributes
+    ----------
+    t_ns : int
+        Time of the step (the tracker's: the scan time on the common clock).
+    ids : (n,) int64
+        Agents listed in the area at that time (ground truth).
+    positions_m : (n, 2) float64
+        Their true body centres.
+    centres_m : (m, 2) float64
+        Centre (mean point) of each segment the detector made, people's or not.
+    returns : (m, n) int64
+        Number of points of segment ``j`` that are returns of a beam which hit agent ``i``.
+    """
+
+    t_ns: int
+    ids: np.ndarray
+    positions_m: np.ndarray
+    centres_m: np.ndarray
+    returns: np.ndarray
+
+    def __post_init__(self) -> None:
+        ids = np.asarray(self.ids).astype(np.int64).reshape(-1)
+        pos = np.asarray(self.positions_m, np.float64).reshape(-1, 2) if ids.size else np.zeros((0, 2))
+        centres = np.asarray(self.centres_m, np.float64)
+        centres = centres.reshape(-1, 2) if centres.size else np.zeros((0, 2))
+        returns = np.asarray(self.returns).astype(np.int64).reshape(len(centres), ids.size)
+        if pos.shape != (ids.size, 2):
+            raise ValueError(f"SegmentFrame at {self.t_ns}: positions_m has shape {pos.shape}, expected "
+                             f"({ids.size}, 2)")
+        if np.unique(ids).size != ids.size:
+            raise ValueError(f"SegmentFrame at {self.t_ns}: agent ids must be unique")
+        for name, value in (("t_ns", int(self.t_ns)), ("ids", ids), ("positions_m", pos), ("centres_m", centres),
+                            ("returns", returns)):
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class SegmentAnalysis:
+    """Per-frame measurement-truth results of :func:`segment_situations`, in the frames' agent order.
+
+    Attributes
+    ----------
+    t_ns : (T,) int64
+    ids : list of (n_k,) int64
+    positions : list of (n_k, 2) float64
+        True body centres.
+    labels : list of (n_k,) :data:`SITUATION_DTYPE`
+        :class:`~fusiontrack.types.Situation` values, :data:`HIDDEN` for agents without returns.
+    seen : list of (n_k,) bool
+    merged_set : list of (n_k,) int64
+        Merged-set index within the frame, ``-1`` = not merged.
+    partners : list of list of (p,) int64
+        Per agent, the other agents it interacts with (sharing a segment, or members of a gated segment).
+    segment_centre : list of (n_k, 2) float64
+        Centre of the segment holding most of the agent's returns (NaN when hidden).
+    """
+
+    t_ns: np.ndarray
+    ids: list[np.ndarray]
+    positions: list[np.ndarray]
+    labels: list[np.ndarray]
+    seen: list[np.ndarray]
+    merged_set: list[np.ndarray]
+    partners: list[list[np.ndarray]]
+    segment_centre: list[np.ndarray]
+
+
+def load_laser_hits(recording: Any) -> dict[str, dict[str, np.ndarray]]:
+    """The simulator's per-beam truth of a recording folder: ``{laser: {"t_ns", "stamp_ns", "hit_ids"}}``.
+
+    ``hit_ids`` (n_scans, n_beams) int64 is the agent id each beam hit (``-1``: static world or nothing),
+    ``stamp_ns`` the header stamp of the matching ``/<laser>/scan`` message, ``t_ns`` its true time.
+
+    Raises
+    ------
+    fusiontrack.errors.RecordingError
+        The folder has no ``ground_truth/laser_hits_*.npz`` (a recording simulated before the simulator wrote
+        it, or not a simulation): it has no measurement truth; simulate it again.
+    """
+    from pathlib import Path
+
+    from ..errors import RecordingError
+
+    folder = Path(recording)
+    if folder.is_file():
+        folder = folder.parent
+    files = sorted((folder / "ground_truth").glob("laser_hits_*.npz"))
+    if not files:
+        raise RecordingError(f"{folder}: no ground_truth/laser_hits_<laser>.npz, so no measurement-level situation "
+                             f"truth (the recording was made before the simulator wrote it, or is not a "
+                             f"simulation); simulate it again")
+    out = {}
+    for f in files:
+        with np.load(f) as z:
+            hits = z["hit_ids"].astype(np.int64)
+            t_ns, stamp_ns = z["t_ns"].astype(np.int64), z["stamp_ns"].astype(np.int64)
+        if hits.ndim != 2 or hits.shape[0] != t_ns.size or stamp_ns.size != t_ns.size:
+            raise RecordingError(f"{f}: inconsistent arrays (hit_ids {hits.shape}, t_ns {t_ns.shape}, "
+                                 f"stamp_ns {stamp_ns.shape})")
+        out[f.stem.removeprefix("laser_hits_")] = {"t_ns": t_ns, "stamp_ns": stamp_ns, "hit_ids": hits}
+    return out
+
+
+def segment_situations(frames: Sequence[SegmentFrame], bounds_m: Any, *, min_returns: int = 3,
+                       gate_m: float = 0.8, edge_m: float = 0.5, appear_window_s: float = 1.0,
+                       min_state_s: float = 0.1) -> SegmentAnalysis:
+    """Seed 001's situation of every listed agent in every frame, from the measurement truth.
+
+    Parameters
+    ----------
+    frames : sequence of SegmentFrame
+        In strictly increasing time.
+    bounds_m : (4,) float
+        ``(x_min, y_min, x_max, y_max)`` of the monitored area, m.
+    min_returns : int
+        Returns of an agent a segment must hold for the agent to be a member of it.
+    gate_m : float
+        B6 gate radius about the true centre, m (``2h``).
+    edge_m : float
+        Width of the edge band, m (B7 ``d_edge``).
+    appear_window_s : float
+        How long after an appear event (before a disappear event) an agent is appearing (disappearing), s.
+    min_state_s : float
+        Shortest sighting (consecutive frames in which the agent is seen) that confirms an appear, s.
+
+    Returns
+    -------
+    SegmentAnalysis
+    """
+    return _segment_analysis(frames, bounds_m, min_returns, gate_m, edge_m, appear_window_s, min_state_s)[0]
+
+
+def segment_situation_events(frames: Sequence[SegmentFrame], bounds_m: Any, *, min_returns: int = 3,
+                             gate_m: float = 0.8, edge_m: float = 0.5, appear_window_s: float = 1.0,
+                             max_gap_s: float = 1.0, min_state_s: float = 0.1, sensor: str = "ground_truth",
+                             split_hold_s: float = 0.0, correlated_gap_s: float = 0.0,
+                             min_correlated_s: float = 0.0) -> list[Event]:
+    """Seed 001's situation events from the measurement truth (module docstring, "Measurement truth").
+
+    Parameters are those of :func:`segment_situations`, plus ``max_gap_s`` (longest time between two frames in
+    which a pair, or an agent, is seen for a change of state to count, s), ``min_state_s`` (how long a pair's
+    "together" or an agent's correlated / merged / neither state must hold, in every frame it is seen, before it
+    counts), ``sensor`` and the persistence rules ``split_hold_s``, ``correlated_gap_s``, ``min_correlated_s``
+    of :func:`situation_events`.
+
+    Returns
+    -------
+    list of Event
+        Sorted by ``(t_ns, kind order of EVENT_KINDS, track_ids)``.
+    """
+    if not max_gap_s > 0:
+        raise ValueError(f"max_gap_s: expected a value > 0, got {max_gap_s!r}")
+    if not min_state_s >= 0:
+        raise ValueError(f"min_state_s: expected a value >= 0, got {min_state_s!r}")
+    a, appear, disappear = _segment_analysis(frames, bounds_m, min_returns, gate_m, edge_m, appear_window_s,
+                                             min_state_s)
+    gap_ns = round(max_gap_s * 1e9)
+    events: list[Event] = []
+    hold_ns = round(min_state_s * 1e9)
+    # per pair: [confirmed state (None = not yet), its merged set, candidate state, candidate start, last seen]
+    pairs: dict[tuple[int, int], list[Any]] = {}
+    last_set: dict[int, frozenset[int] | None] = {}
+    for k in range(a.t_ns.size):
+        t = int(a.t_ns[k])
+        seen = a.seen[k]
+        ids = a.ids[k][seen].tolist()
+        sets = a.merged_set[k][seen].tolist()
+        pos = dict(zip(ids, a.positions[k][seen], strict=True))
+        groups: dict[int, frozenset[int]] = {
+            s: frozenset(i for i, q in zip(ids, sets, strict=True) if q == s) for s in set(sets) if s >= 0}
+        set_of = {i: groups.get(q) for i, q in zip(ids, sets, strict=True)}
+        merged_now: dict[frozenset[int], int] = {}  # merged set -> start of the change
+        split_prev: dict[frozenset[int], int] = {}
+        order = sorted(ids)
+        for x in range(len(order)):
+            for y in range(x + 1, len(order)):
+                i, j = order[x], order[y]
+                together = set_of[i] is not None and set_of[i] is set_of[j]
+                st = pairs.get((i, j))
+                if st is None or t - st[4] > gap_ns:  # first seen together, or seen again after too long
+                    st = pairs[(i, j)] = [None, None, None, t, t]
+                st[4] = t
+                if together == st[0]:
+                    st[2] = None
+                    if together:
+                        st[1] = set_of[i]
+                    continue
+                if st[2] != together:
+                    st[2], st[3] = together, t
+                if t - st[3] < hold_ns:
+                    continue
+                if st[0] is not None:
+                    if together:
+                        merged_now[set_of[i]] = min(merged_now.get(set_of[i], t), st[3])
+                    else:
+                        split_prev[st[1]] = min(split_prev.get(st[1], t), st[3])
+                st[0], st[1], st[2] = together, set_of[i] if together else None, None
+        for members, t0 in sorted(merged_now.items(), key=lambda item: sorted(item[0])):
+            parts = _parts(sorted(members), [_set_key(last_set.get(i), i) for i in sorted(members)])
+            events.append(Event(t_ns=t0, sensor=sensor, kind=EVENT_MERGE, t_end_ns=t0,
+                                position_m=np.mean([pos[i] for i in members], axis=0),
+                                track_ids=tuple(sorted(members)), attributes={"parts": parts}))
+        for members, t0 in sorted(split_prev.items(), key=lambda item: sorted(item[0])):
+            here = [i for i in sorted(members) if i in set_of]
+            parts = _parts(here, [_set_key(set_of[i], i) for i in here])
+            events.append(Event(t_ns=t0, sensor=sensor, kind=EVENT_SPLIT, t_end_ns=t0,
+                                position_m=np.mean([pos[i] for i in here], axis=0) if here else None,
+                                track_ids=tuple(sorted(members)), attributes={"parts": parts}))
+        last_set.update(set_of)
+    if split_hold_s > 0:
+        events = drop_undone_splits(events, split_hold_s)
+    _held_correlated_runs(events, a, sensor, hold_ns, gap_ns, round(correlated_gap_s * 1e9),
+                          round(min_correlated_s * 1e9))
+    for t_ns, t_end_ns, members, centre in appear:
+        events.append(Event(t_ns=t_ns, sensor=sensor, kind=EVENT_APPEAR, t_end_ns=t_end_ns, position_m=centre,
+                            track_ids=members))
+    for t_ns, agent, centre in disappear:
+        events.append(Event(t_ns=t_ns, sensor=sensor, kind=EVENT_DISAPPEAR, t_end_ns=t_ns, position_m=centre,
+                            track_ids=(agent,)))
+    order_of = {kind: i for i, kind in enumerate(EVENT_KINDS)}
+    events.sort(key=lambda e: (e.t_ns, order_of[e.kind], e.track_ids))
+    return events
+
+
+def _held_correlated_runs(events: list[Event], a: SegmentAnalysis, sensor: str, hold_ns: int, gap_ns: int,
+                          bridge_ns: int, min_ns: int) -> None:
+    """Correlated events of the measurement truth: per agent, over the frames it is seen, its state (correlated,
+    merged or neither) changes when the new state holds for ``hold_ns``; a run of the correlated state is one
+    event, from its first frame to its last correlated frame. Seen frames more than ``gap_ns`` apart end the
+    run; runs at most ``bridge_ns`` apart are joined unless a merge came between; shorter than ``min_ns``: no
+    event."""
+    series: dict[int, list[tuple[int, str, set[int], np.ndarray]]] = {}
+    for k in range(a.t_ns.size):
+        for j in np.flatnonzero(a.seen[k]):
+            lab = str(a.labels[k][j])
+            state = lab if lab in (Situation.CORRELATED, Situation.MERGED) else "other"
+            series.setdefault(int(a.ids[k][j]), []).append(
+                (int(a.t_ns[k]), state, set(a.partners[k][j].tolist()), a.positions[k][j]))
+    for agent, rows in series.items():
+        runs: list[list[Any]] = []  # [start, last correlated frame, partners, position, ended by a merge]
+        state, cand, cand_t, last_t = None, None, 0, None
+        cur: list[Any] | None = None
+        for t, raw, partners, pos in rows:
+            if last_t is not None and t - last_t > gap_ns:
+                state, cand, cur = None, None, None
+            last_t = t
+            if raw == state:
+                cand = None
+            else:
+                if cand != raw:
+                    cand, cand_t = raw, t
+                if t - cand_t >= hold_ns:
+                    if cur is not None:
+                        cur[4] = raw == Situation.MERGED
+                        cur = None
+                    state, cand = raw, None
+                    if raw == Situation.CORRELATED:
+                        cur = [cand_t, t, set(), pos, False]
+                        runs.append(cur)
+            if cur is not None and raw == Situation.CORRELATED:
+                cur[1] = t
+                cur[2] |= partners
+        joined: list[list[Any]] = []
+        for run in runs:
+            if joined and not joined[-1][4] and run[0] - joined[-1][1] <= bridge_ns:
+                joined[-1][1], joined[-1][4] = run[1], run[4]
+                joined[-1][2] |= run[2]
+            else:
+                joined.append(run)
+        for start, last, partners, pos, _ in joined:
+            if last - start >= min_ns:
+                events.append(_correlated_event(agent, (start, last, partners, pos, 0), sensor))
+
+
+def _set_key(members: frozenset[int] | None, agent: int) -> int:
+    """Group key for :func:`_parts`: the smallest member of a merged set, ``-1`` (alone) otherwise."""
+    return min(members) if members else -1
+
+
+_AppearRows = list[tuple[int, int, tuple[int, ...], np.ndarray]]
+_DisappearRows = list[tuple[int, int, np.ndarray]]
+
+
+def _segment_analysis(frames: Sequence[SegmentFrame], bounds_m: Any, min_returns: int, gate_m: float, edge_m: float,
+                      appear_window_s: float, min_state_s: float
+                      ) -> tuple[SegmentAnalysis, _AppearRows, _DisappearRows]:
+    bounds = _check_bounds(bounds_m)
+    if isinstance(min_returns, bool) or not isinstance(min_returns, int | np.integer) or min_returns < 1:
+        raise ValueError(f"min_returns: expected an integer >= 1, got {min_returns!r}")
+    for name, value in (("gate_m", gate_m), ("appear_window_s", appear_window_s)):
+        if not value > 0:
+            raise ValueError(f"{name}: expected a value > 0, got {value!r}")
+    if not min_state_s >= 0:
+        raise ValueError(f"min_state_s: expected a value >= 0, got {min_state_s!r}")
+    if not edge_m >= 0:
+        raise ValueError(f"edge_m: expected a value >= 0, got {edge_m!r}")
+    frames = list(frames)
+    for k, f in enumerate(frames):
+        if not isinstance(f, SegmentFrame):
+            raise TypeError(f"frames[{k}]: expected a SegmentFrame, got {type(f).__name__}")
+    t_all = np.array([f.t_ns for f in frames], dtype=np.int64)
+    if np.any(np.diff(t_all) <= 0):
+        raise ValueError("frames: times must be strictly increasing")
+    window_ns = round(appear_window_s * 1e9)
+
+    seen_all, merged_all, partners_all, corr_all, centre_all = [], [], [], [], []
+    for f in frames:
+        n = f.ids.size
+        member = f.returns >= min_returns  # (m, n)
+        n_mem = member.sum(axis=1)
+        seen = member.any(axis=0)
+        own = (member & (n_mem == 1)[:, None]).any(axis=0)
+        shared = n_mem >= 2
+        cand = seen & ~own
+        set_index = np.full(n, -1, np.int64)
+        if cand.sum() >= 2 and shared.any():
+            m_c = member[shared][:, cand].astype(np.int64)
+            _, comp = connected_components(csr_matrix((m_c.T @ m_c) > 0), directed=False)
+            big = np.bincount(comp)[comp] >= 2
+            if big.any():
+                idx = np.flatnonzero(cand)[big]
+                set_index[idx] = np.unique(comp[big], return_inverse=True)[1]
+        merged = set_index >= 0
+        in_shared = (member & shared[:, None]).any(axis=0)
+        if len(f.centres_m) and n:
+            gated = (np.linalg.norm(f.positions_m[:, None, :] - f.centres_m[None, :, :], axis=2) < gate_m) \
+                & (n_mem >= 1)[None, :]  # (n, m)
+            holds_other = (n_mem[None, :] - member.T) >= 1  # (n, m)
+            by_gate = (gated.sum(axis=1) >= 2) & (gated & holds_other).any(axis=1)
+            # partners: members of the segments in the gate and of the shared segments one is a member of
+            touch = gated | (member.T & shared[None, :])
+            near = (touch.astype(np.int64) @ member.astype(np.int64)) > 0  # (n, n)
+            np.fill_diagonal(near, False)
+            best = np.argmax(f.returns, axis=0)
+            centre = np.where(seen[:, None], f.centres_m[best], np.nan)
+        else:
+            by_gate = np.zeros(n, bool)
+            near = np.zeros((n, n), bool)
+            centre = np.full((n, 2), np.nan)
+        seen_all.append(seen)
+        merged_all.append(set_index)
+        corr_all.append(seen & ~merged & (in_shared | by_gate))
+        partners_all.append([f.ids[near[j]] for j in range(n)])
+        centre_all.append(centre)
+
+    # first frame in which every agent is seen, if it is ever seen for min_state_s in a row (B7 rule 6 confirms a
+    # new detection after N_confirm frames), and when that sighting starts; last frame in which it is seen at
+    # all (rule 5 needs no confirmation)
+    seen_frames: dict[int, list[int]] = {}
+    for k, f in enumerate(frames):
+        for i in f.ids[seen_all[k]].tolist():
+            seen_frames.setdefault(i, []).append(k)
+    first: dict[int, int] = {}
+    confirmed: dict[int, int] = {}
+    last: dict[int, int] = {}
+    hold_ns = round(min_state_s * 1e9)
+    for i, ks in seen_frames.items():
+        ks_a = np.asarray(ks)
+        breaks = np.flatnonzero(np.diff(ks_a) != 1)
+        starts, ends = np.r_[ks_a[0], ks_a[breaks + 1]], np.r_[ks_a[breaks], ks_a[-1]]
+        lasting = (t_all[ends] - t_all[starts]) >= hold_ns
+        if lasting.any():
+            first[i], confirmed[i] = int(ks_a[0]), int(t_all[starts[lasting][0]])
+        last[i] = int(ks_a[-1])
+    listed_at_end = set(frames[-1].ids.tolist()) if frames else set()
+    appear_events: list[tuple[int, tuple[int, ...], np.ndarray]] = []
+    appear_t: dict[int, int] = {}
+    by_frame: dict[int, list[int]] = {}
+    for i, k in first.items():
+        by_frame.setdefault(k, []).append(i)
+    for k, newcomers in sorted(by_frame.items()):
+        f = frames[k]
+        col = {i: j for j, i in enumerate(f.ids.tolist())}
+        groups: dict[tuple[float, float], list[int]] = {}
+        for i in newcomers:
+            groups.setdefault(tuple(centre_all[k][col[i]]), []).append(i)
+        for c, members in sorted(groups.items()):
+            centre = np.array(c)
+            if _edge_distance(centre[None], bounds)[0] <= edge_m:
+                appear_events.append((int(t_all[k]), max(confirmed[i] for i in members), tuple(sorted(members)),
+                                      centre))
+                appear_t.update(dict.fromkeys(members, int(t_all[k])))
+    disappear_events: list[tuple[int, int, np.ndarray]] = []
+    disappear_t: dict[int, int] = {}
+    for i, k in last.items():
+        if i in listed_at_end:
+            continue
+        centre = centre_all[k][int(np.flatnonzero(frames[k].ids == i)[0])]
+        if _edge_distance(centre[None], bounds)[0] <= edge_m:
+            disappear_events.append((int(t_all[k]), i, centre))
+            disappear_t[i] = int(t_all[k])
+
+    labels = []
+    for k, f in enumerate(frames):
+        t = int(t_all[k])
+        ids = f.ids.tolist()
+        appear = np.array([i in appear_t and 0 <= t - appear_t[i] < window_ns for i in ids], bool)
+        disappear = np.array([i in disappear_t and 0 <= disappear_t[i] - t < window_ns for i in ids], bool)
+        lab = np.full(len(ids), Situation.NONCORRELATED.value, dtype=SITUATION_DTYPE)
+        lab[disappear.reshape(-1)] = Situation.DISAPPEARING.value
+        lab[appear.reshape(-1)] = Situation.APPEARING.value
+        lab[corr_all[k]] = Situation.CORRELATED.value
+        lab[merged_all[k] >= 0] = Situation.MERGED.value
+        lab[~seen_all[k]] = HIDDEN
+        labels.append(lab)
+    analysis = SegmentAnalysis(t_all, [f.ids for f in frames], [f.positions_m for f in frames], labels, seen_all,
+                               merged_all, partners_all, centre_all)
+    return analysis, appear_events, disappear_events
+
+
 # ---- internals -----------------------------------------------------------------------------------
+
+
+def _correlated_runs(events: list[Event], t_ns: np.ndarray, ids: list[np.ndarray], positions: list[np.ndarray],
+                     labels: list[np.ndarray], partners_of: list[list[np.ndarray]], sensor: str,
+                     correlated_gap_s: float, min_correlated_s: float) -> None:
+    """Append one ``correlated`` event per agent and run of correlated frames (rules of :func:`situation_events`)."""
+    runs: dict[int, tuple[int, int, set[int], np.ndarray, int]] = {}  # id -> (start, last, partners, pos, k)
+    gap_ns, min_ns = round(correlated_gap_s * 1e9), round(min_correlated_s * 1e9)
+    for k in range(t_ns.size):
+        t = int(t_ns[k])
+        listed = set(ids[k].tolist())
+        for agent in [i for i in runs if i not in listed]:  # not listed (left the area): the run ends
+            _close_run(events, agent, runs.pop(agent), sensor, min_ns)
+        for j, agent in enumerate(ids[k].tolist()):
+            run = runs.get(agent)
+            ended = run is not None and run[4] != k - 1 and t - run[1] > gap_ns  # a gap too long to bridge
+            if labels[k][j] != Situation.CORRELATED:  # a merge always ends the run (as in the tracker)
+                if ended or (run is not None and (gap_ns == 0 or labels[k][j] == Situation.MERGED)):
+                    _close_run(events, agent, runs.pop(agent), sensor, min_ns)
+                continue
+            if ended:
+                _close_run(events, agent, runs.pop(agent), sensor, min_ns)
+                run = None
+            partners = set(partners_of[k][j].tolist())
+            runs[agent] = ((t, t, partners, positions[k][j], k) if run is None
+                           else (run[0], t, run[2] | partners, run[3], k))
+    for agent, run in runs.items():
+        _close_run(events, agent, run, sensor, min_ns)
 
 
 def _close_run(events: list[Event], agent: int, run: tuple[int, int, set[int], np.ndarray, int], sensor: str,
@@ -320,6 +831,14 @@ def _frame_arrays(frame: Any, k: int) -> tuple[int, np.ndarray, np.ndarray]:
     return int(t_ns), ids, pos
 
 
+def _check_bounds(bounds_m: Any) -> np.ndarray:
+    bounds = np.asarray(bounds_m, dtype=np.float64).reshape(-1)
+    if bounds.shape != (4,) or not np.all(np.isfinite(bounds)) or bounds[2] <= bounds[0] or bounds[3] <= bounds[1]:
+        raise ValueError(f"bounds_m: expected (x_min, y_min, x_max, y_max) with x_min < x_max, y_min < y_max, "
+                         f"got {bounds_m!r}")
+    return bounds
+
+
 def _edge_distance(points: np.ndarray, bounds: np.ndarray) -> np.ndarray:
     """Distance of ``(n, 2)`` points to the boundary of the rectangle ``bounds`` (negative outside), ``(n,)``."""
     return np.minimum(np.minimum(points[:, 0] - bounds[0], bounds[2] - points[:, 0]),
@@ -328,10 +847,7 @@ def _edge_distance(points: np.ndarray, bounds: np.ndarray) -> np.ndarray:
 
 def _analyse(frames: Sequence[Any], bounds_m: Any, d_correlated: float, d_merged: float, edge_m: float,
              appear_window_s: float) -> _Analysis:
-    bounds = np.asarray(bounds_m, dtype=np.float64).reshape(-1)
-    if bounds.shape != (4,) or not np.all(np.isfinite(bounds)) or bounds[2] <= bounds[0] or bounds[3] <= bounds[1]:
-        raise ValueError(f"bounds_m: expected (x_min, y_min, x_max, y_max) with x_min < x_max, y_min < y_max, "
-                         f"got {bounds_m!r}")
+    bounds = _check_bounds(bounds_m)
     if not 0 < d_merged < d_correlated:
         raise ValueError(f"d_merged, d_correlated: expected 0 < d_merged < d_correlated, "
                          f"got {d_merged}, {d_correlated}")
