@@ -13,8 +13,17 @@
    * a merged target that splits (B17): each piece's box is scored by the members' classifiers
      (:meth:`~fusiontrack.vision.appearance.AppearanceBank.box_scores`) and the members are given to the
      pieces by the Hungarian algorithm on ``−score``, when every member has a trained classifier and the
-     best assignment beats the second best by ``split_margin``; by motion otherwise;
-2. **identity checks** [RECON, extends B17] — at a split the people are still side by side and their boxes
+     best assignment beats the second best by ``split_margin`` and gives every member a piece it scores at least
+     B17's ``s_min`` (``AppearanceParams.min_score``), each piece scored outside the other pieces' boxes; by
+     motion otherwise. Both hooks are off by default (``FusionParams.score_map``, ``split_identity``: on the
+     simulated scenes they cost more identities than they saved); the identity checks do their work;
+2. **re-identification** [RECON, extends B17] — the laser loses a track and a new one is born within a few seconds
+   and within walking reach of where it was lost: the lost track's classifier (kept a few seconds) scores the
+   new track's box on clear images, beside the other candidates' and the nearby tracks' classifiers, and when it
+   is confident the new track takes the lost identity, back to its birth (:attr:`FusionTracker.relabels`).
+   The laser tracker keeps its own ids; the fused tracker's states, events and hooks use the identities given
+   back;
+3. **identity checks** [RECON, extends B17] — at a split the people are still side by side and their boxes
    overlap, and a close pass without a merge never asks the camera at all. So every pair of tracks that comes
    within ``d_contact_m`` (or merges or splits together) is *checked*: on the next camera images on which both
    are walking targets with boxes clear of every other box, each classifier of the pair that was trained at the
@@ -25,7 +34,7 @@
    :attr:`FusionTracker.relabels` records the exchange back to where it most likely happened (the pair's last
    split, else its closest approach); :func:`track_fused` applies it to the states already
    returned (:func:`relabel_states`, like B17's re-linking of the merged interval);
-3. **learning** [B15] — a noncorrelated target with another target within ``d_train_m`` (1.5 m) learns from
+4. **learning** [B15] — a noncorrelated target with another target within ``d_train_m`` (1.5 m) learns from
    the camera image nearest in time: positives from its projected box (B11), negatives from the boxes of
    its ``L`` closest targets (patches centred in another box are dropped); at most once every
    ``train_interval_s``; merged targets' classifiers are frozen, and so is a voter of a pending identity check
@@ -105,10 +114,20 @@ class FusionParams:
     group_m : float
         Correlated targets closer than this share one score map [RECON].
     split_identity : bool
-        B17 on (classifiers decide identities at splits).
+        B17 on (classifiers decide identities at splits). Off by default, like ``score_map``: on
+        ``benchmarks/fusion.py``'s scenes (crowd and groups, seeds 0-5, 30 s) it gave 56 ID switches against 40
+        without it (laser-only: 41) and IDF1 0.883 against 0.886: the classifiers of people walking side by
+        side, trained on their overlapping boxes, named the pieces of their splits right only about 6 times in 10
+        (fewer than motion does); the identity checks then correct what motion gets wrong.
     split_margin : float
         Appearance decides a split only if its best assignment of members to pieces beats the second best by
-        this much summed confidence [RECON]; motion otherwise.
+        this much summed confidence [RECON], and every member's score on its piece is at least B17's ``s_min``
+        (``appearance.min_score``); motion otherwise (rather than B17's "the piece becomes a new target": a
+        classifier trained on boxes overlapping its neighbour's is often unsure of its own person).
+    split_exclusive : bool
+        At a split, each piece is scored on its patches outside the other pieces' boxes only (B15's rule for
+        training samples; the people are still side by side, their boxes overlap) [RECON]; a piece left without
+        any gives no appearance decision.
     check_identity : bool
         Identity checks after close contacts (see the module docstring) [RECON].
     d_contact_m : float
@@ -116,7 +135,9 @@ class FusionParams:
         their pair is checked [RECON].
     check_margin : float
         A check decides once the mean evidence per classifier (own box's confidence minus the other box's) is
-        at least this far from 0 over ``check_frames`` clear images or more: keep (> 0) or exchange (< 0) [RECON].
+        at least this far from 0 over ``check_frames`` clear images or more: keep (> 0) or exchange (< 0) [RECON:
+        on ``benchmarks/fusion.py``'s scenes (seeds 0-5) the exchanges decided at 0.4-0.6 were wrong: classifiers
+        trained on side-by-side people are unsure of their own person].
     check_frames : int
         Clear camera images a check needs before it decides [RECON].
     check_s : float
@@ -129,6 +150,21 @@ class FusionParams:
         ... and at least this fraction of each box of the pair is inside the image [RECON: a box mostly off the
         image shows its classifier a sliver of the person; ``benchmarks/fusion.py``'s wrong exchanges were made
         on such slivers].
+    reid : bool
+        Re-identification of reborn tracks [RECON, extends B17]: when the laser loses a track and a new one is
+        born within ``reid_s`` (before or after) within reach of where it was lost (``reid_slack_m`` +
+        ``reid_speed_mps`` x the gap), the lost track's classifier (kept ``reid_s`` after the loss) scores the new
+        track's box on clear camera images (as for a check: ``max_overlap``, ``check_visible``), beside the other
+        candidates' and the nearby live tracks' classifiers; the new track takes the lost identity (back to its
+        birth, :attr:`FusionTracker.relabels`) once, over ``reid_frames`` images or more, the lost classifier's
+        mean confidence is at least ``reid_min`` and beats every other's by ``reid_margin``.
+    reid_s, reid_speed_mps, reid_slack_m : float
+        See ``reid`` [RECON: ``benchmarks/fusion.py``'s losses are re-born within a second or two, a metre or
+        two away].
+    reid_frames : int
+        Clear images a re-identification needs [RECON].
+    reid_min, reid_margin : float
+        See ``reid`` (confidences are in [-1, 1]) [RECON].
     height_m, width_ratio : float
         B11's person box (``H_p``, ``r_w``).
     max_frame_dt_s : float
@@ -142,34 +178,47 @@ class FusionParams:
     score_map: bool = False
     score_beta: float = 0.5
     group_m: float = 1.0
-    split_identity: bool = True
+    split_identity: bool = False
     split_margin: float = 1.0
+    split_exclusive: bool = True
     check_identity: bool = True
     d_contact_m: float = 0.8
-    check_margin: float = 0.4
+    check_margin: float = 0.6
     check_frames: int = 3
     check_s: float = 4.0
     max_overlap: float = 0.3
     check_visible: float = 0.5
+    reid: bool = True
+    reid_s: float = 4.0
+    reid_speed_mps: float = 2.0
+    reid_slack_m: float = 1.0
+    reid_frames: int = 3
+    reid_min: float = 0.4
+    reid_margin: float = 0.3
     height_m: float = 1.70
     width_ratio: float = 0.40
     max_frame_dt_s: float = 0.05
     appearance: AppearanceParams = field(default_factory=AppearanceParams)
 
     def __post_init__(self) -> None:
-        if isinstance(self.check_frames, bool) or not isinstance(self.check_frames, int) or self.check_frames < 1:
-            raise ConfigError(f"FusionParams.check_frames: expected an integer >= 1, got {self.check_frames!r}")
+        for name in ("check_frames", "reid_frames"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ConfigError(f"FusionParams.{name}: expected an integer >= 1, got {v!r}")
         if not 0 < self.max_overlap <= 1:
             raise ConfigError(f"FusionParams.max_overlap: expected a fraction in (0, 1], got {self.max_overlap!r}")
         if not (isinstance(self.check_visible, int | float) and 0 <= self.check_visible <= 1):
             raise ConfigError(f"FusionParams.check_visible: expected a fraction in [0, 1], got {self.check_visible!r}")
         for name in ("d_train_m", "train_interval_s", "score_beta", "group_m", "split_margin", "height_m",
-                     "width_ratio", "max_frame_dt_s", "d_contact_m", "check_margin", "check_s"):
+                     "width_ratio", "max_frame_dt_s", "d_contact_m", "check_margin", "check_s", "reid_s",
+                     "reid_speed_mps", "reid_slack_m", "reid_margin"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and np.isfinite(v) and v >= 0):
                 raise ConfigError(f"FusionParams.{name}: expected a finite value >= 0, got {v!r}")
         if self.height_m <= 0 or self.width_ratio <= 0:
             raise ConfigError("FusionParams.height_m, width_ratio: expected values > 0")
+        if not (isinstance(self.reid_min, int | float) and -1 <= self.reid_min <= 1):
+            raise ConfigError(f"FusionParams.reid_min: expected a confidence in [-1, 1], got {self.reid_min!r}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -274,6 +323,8 @@ class FusionStats:
     overrides: int = 0  # splits where appearance gave another assignment than motion
     checks: int = 0  # identity checks decided
     exchanges: int = 0  # ... that exchanged the identities of a pair
+    reid_claims: int = 0  # new tracks born near a recently lost one (re-identification candidates)
+    reids: int = 0  # ... given the lost identity
     camera_s: float = 0.0  # time spent on the camera side (reading, learning, scoring)
     camera: str = ""  # the camera fused ("": none, the lasers alone)
     bias: CameraBias | None = None  # the camera's horizontal bias learnt before fusing (None: not learnt)
@@ -318,6 +369,17 @@ def _assignment_gap(scores: np.ndarray) -> float:
     return best - second if np.isfinite(second) else float("inf")
 
 
+def _assigned_min(scores: np.ndarray) -> float:
+    """The lowest score of the best one-to-one assignment of rows to columns (B17 rejects a pair below ``s_min``)."""
+    from scipy.optimize import linear_sum_assignment
+
+    s = np.asarray(scores, np.float64)
+    if min(s.shape) == 0:
+        return -np.inf
+    rows, cols = linear_sum_assignment(s, maximize=True)
+    return float(s[rows, cols].min())
+
+
 @dataclass(slots=True)
 class _Check:
     """A pair of tracks that came into contact: their identities wait for the camera's evidence."""
@@ -332,6 +394,18 @@ class _Check:
     image_ns: int = -1  # the last image that gave evidence
     decided: bool = False  # decided since the pair's last contact: waits for the next contact
     exchanged: bool = False  # an exchange was decided: the pair's later checks keep these voters
+
+
+@dataclass(slots=True)
+class _Claim:
+    """A new track born near recently lost ones: may it take one of their identities?"""
+
+    first_ns: int  # its first detection
+    candidates: list[int]  # the lost ids it may be
+    sums: dict[int, float] = field(default_factory=dict)  # id -> summed mean box confidence
+    counts: dict[int, int] = field(default_factory=dict)
+    n: int = 0  # images scored
+    image_ns: int = -1
 
 
 @dataclass(frozen=True, slots=True)
@@ -401,7 +475,8 @@ class FusionTracker:
     area_m : optional
         Covered area (see :class:`LaserPeopleTracker`).
     rng : Generator, int or None
-        Normalised once; the laser tracker and the bank get independent streams from it.
+        The laser tracker's, used as :class:`LaserPeopleTracker` uses it (so a fused run draws the laser-only
+        run's particles); the bank gets an independent child stream of it.
     camera_name : str
         The camera's sensor name, added to ``TrackState.sensors`` when its image was used.
 
@@ -419,7 +494,11 @@ class FusionTracker:
         self.camera = camera
         self.frames: FrameSource = frames if frames is not None and camera is not None else _NoFrames()
         self.camera_name = camera_name
-        r_laser, r_bank = np.random.default_rng(rng).spawn(2)
+        # the laser tracker draws exactly the stream laser-only's tracker draws for the same ``rng`` (the two
+        # pipelines' runs are paired: where the camera changes nothing, their tracks are identical); the bank gets
+        # a child stream (spawning does not advance the parent)
+        r_laser = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+        r_bank = r_laser.spawn(1)[0]
         self.bank = AppearanceBank(p.appearance, rng=r_bank)
         self.laser = LaserPeopleTracker(tracker_params, area_m=area_m, rng=r_laser,
                                         extra_log_likelihood=self._score_map_ll if p.score_map else None,
@@ -432,6 +511,13 @@ class FusionTracker:
         self._frames_seen: set[int] = set()
         self._checks: dict[tuple[int, int], _Check] = {}
         self.relabels: list[Relabel] = []
+        # re-identification: the laser tracker keeps its own ids; a reborn track's output id is the lost one's
+        self._alias: dict[int, int] = {}  # laser id -> output id (only for re-identified tracks)
+        self._laser_id: dict[int, int] = {}  # output id -> laser id (its inverse, for live re-identified tracks)
+        self._lost: dict[int, tuple[int, int, np.ndarray]] = {}  # lost id -> (last seen, death time, position)
+        self._born: dict[int, tuple[int, np.ndarray]] = {}  # recent births: id -> (first detection, position)
+        self._claims: dict[int, _Claim] = {}  # new id -> its claim on lost identities
+        self._span: dict[int, list[int]] = {}  # output id -> [first, last] time of its states
 
     @property
     def area_m(self) -> np.ndarray | None:
@@ -448,7 +534,12 @@ class FusionTracker:
         self._used = set()
         self.stats.steps += 1
         states = self.laser.step(t_ns, detections)
-        self.events = list(self.laser.events)
+        self.events = self._out_events(self.laser.events)
+        if self._alias:
+            states = [dataclasses.replace(st, track_id=self._alias[st.track_id]) if st.track_id in self._alias
+                      else st for st in states]
+        if self.params.reid:
+            states = self._reidentify(int(t_ns), states)
         if self.params.check_identity and states:
             states = self._check_identities(int(t_ns), states)
         if states:
@@ -462,7 +553,26 @@ class FusionTracker:
 
     def finish(self) -> list[Event]:
         """The events still held back by the laser tracker (end of a run)."""
-        return self.laser.finish()
+        return self._out_events(self.laser.finish())
+
+    def _out(self, tid: int) -> int:
+        """The output id of laser track ``tid``."""
+        return self._alias.get(int(tid), int(tid))
+
+    def _out_events(self, events: Iterable[Event]) -> list[Event]:
+        """The laser tracker's events under the output ids."""
+        if not self._alias:
+            return list(events)
+        out = []
+        for e in events:
+            if any(t in self._alias for t in e.track_ids):
+                attrs = e.attributes
+                if "parts" in attrs:
+                    attrs = {**attrs, "parts": tuple(tuple(sorted(self._out(t) for t in part))
+                                                     for part in attrs["parts"])}
+                e = dataclasses.replace(e, track_ids=tuple(self._out(t) for t in e.track_ids), attributes=attrs)
+            out.append(e)
+        return out
 
     # ---------------------------------------------------------------------------------------------
     def _image(self, t_ns: int) -> Image | None:
@@ -487,7 +597,7 @@ class FusionTracker:
     def _forget(self, events: Iterable[Event]) -> None:
         for e in events:
             if e.kind in ("disappear", "lost"):
-                self.bank.drop(e.track_ids)
+                self.bank.drop([tid for tid in e.track_ids if tid not in self._lost])  # (kept to re-identify)
                 for tid in e.track_ids:
                     self._scored.pop(tid, None)
                     self._learnt_t.pop(tid, None)
@@ -496,6 +606,158 @@ class FusionTracker:
                 if e.attributes.get("identity") == "appearance":
                     self.stats.splits_by_appearance += 1
                     self.stats.overrides += bool(e.attributes.get("overrode_motion"))
+
+    # ---------------------------------------------------------------------------------------------
+    def _reidentify(self, t_ns: int, states: list[TrackState]) -> list[TrackState]:
+        """Re-identification of reborn tracks (``FusionParams.reid``): note this step's losses and births, open
+        claims of new tracks on lost identities within reach, score them on a clear camera image and give the lost
+        identity back when its classifier is confident. Returns the states with the identities given back."""
+        p = self.params
+        horizon = round(p.reid_s * 1e9)
+        for st in states:
+            span = self._span.get(st.track_id)
+            if span is None:
+                self._span[st.track_id] = [st.t_ns, st.t_ns]
+            else:
+                span[1] = st.t_ns
+        for e in self.events:
+            if e.kind == "disappear" or (e.kind == "lost" and not (len(e.track_ids) == 1
+                                                                   and self.bank.is_trained(e.track_ids[0]))):
+                for tid in e.track_ids:
+                    self._span.pop(tid, None)
+            elif e.kind == "lost":  # inside the area (at its edge the person most likely left it)
+                tid = e.track_ids[0]
+                pos = np.asarray(e.position_m if e.position_m is not None else np.full(2, np.nan), float)
+                self._lost[tid] = (int(e.t_ns), t_ns, pos)
+                self._claims.pop(tid, None)
+                for q, (first, qpos) in self._born.items():  # a track born before the loss was declared
+                    self._open_claim(q, first, qpos, tid)
+            elif e.kind in ("born", "appear") and len(e.track_ids) == 1 and e.position_m is not None:
+                q = e.track_ids[0]
+                self._born[q] = (int(e.t_ns), np.asarray(e.position_m, float))
+                for tid in self._lost:
+                    self._open_claim(q, int(e.t_ns), self._born[q][1], tid)
+        # forget what is too old to matter
+        for tid in [tid for tid, lost in self._lost.items() if t_ns - lost[1] > horizon]:
+            del self._lost[tid]
+            self.bank.drop(tid)
+            self._span.pop(tid, None)
+            for c in self._claims.values():
+                if tid in c.candidates:
+                    c.candidates.remove(tid)
+        live = {st.track_id for st in states}
+        for q in [q for q, (first, _) in self._born.items() if t_ns - first > horizon or q not in live]:
+            del self._born[q]
+        for q in [q for q, c in self._claims.items() if not c.candidates or q not in live
+                  or t_ns - c.first_ns > 2 * horizon]:
+            del self._claims[q]
+        if not self._claims:
+            return states
+        t_img = self.frames.nearest_time(t_ns)
+        if t_img is None:
+            return states
+        interval = round(p.train_interval_s * 1e9)
+        row = {st.track_id: k for k, st in enumerate(states)}
+        todo = [q for q, c in self._claims.items() if t_img - c.image_ns >= interval
+                and states[row[q]].situation != _MERGED]
+        if not todo:
+            return states
+        t0 = time.perf_counter()
+        pos = np.array([st.position_m for st in states])
+        boxes = self._boxes(pos)
+        ok = np.isfinite(boxes).all(axis=1)
+        occluded = _occlusion(boxes, ok)
+        if p.check_visible > 0 and self.camera is not None:
+            ok &= box_visibility(boxes, (self.camera.height, self.camera.width)) >= p.check_visible
+        todo = [q for q in todo if ok[row[q]] and occluded[row[q]] <= p.max_overlap]
+        img = self._image(t_ns) if todo else None
+        given: dict[int, int] = {}
+        if img is not None:
+            d = np.linalg.norm(pos[:, None] - pos[None], axis=2)
+            for q in todo:
+                c = self._claims[q]
+                k = row[q]
+                # the alternatives: the live tracks around it (it could be one of them seen twice, or look alike)
+                alts = [states[j].track_id for j in np.flatnonzero(d[k] < p.d_train_m)
+                        if j != k and self.bank.is_trained(states[j].track_id)]
+                ids = [*c.candidates, *alts]
+                sc = self.bank.box_scores(img.pixels, boxes[k][None], ids)[0]
+                if not np.isfinite(sc).all():
+                    continue
+                c.n += 1
+                c.image_ns = t_img
+                for tid, v in zip(ids, sc, strict=True):
+                    c.sums[tid] = c.sums.get(tid, 0.0) + float(v)
+                    c.counts[tid] = c.counts.get(tid, 0) + 1
+                self._used.add(q)
+                best = self._claim_decision(c)
+                if best is not None and best not in given.values():
+                    given[q] = best
+        for q, lost in given.items():
+            states = self._give_back(t_ns, q, lost, states)
+        self.stats.camera_s += time.perf_counter() - t0
+        return states
+
+    def _open_claim(self, q: int, first_ns: int, q_pos: np.ndarray, lost: int) -> None:
+        """Let new track ``q`` (first detected at ``first_ns`` at ``q_pos``) claim lost id ``lost`` if within
+        reach in time and space."""
+        p = self.params
+        seen_ns, _, pos = self._lost[lost]
+        gap_s = (first_ns - seen_ns) / 1e9
+        span = self._span.get(lost)
+        if q == lost or gap_s > p.reid_s or gap_s < -p.reid_s or (span is not None and span[0] >= first_ns):
+            return
+        if not np.hypot(*(q_pos - pos)) <= p.reid_slack_m + p.reid_speed_mps * abs(gap_s):
+            return
+        c = self._claims.get(q)
+        if c is None:
+            self._claims[q] = _Claim(first_ns, [lost])
+            self.stats.reid_claims += 1
+        elif lost not in c.candidates:
+            c.candidates.append(lost)
+
+    def _claim_decision(self, c: _Claim) -> int | None:
+        """The lost id a claim is decided for, or None (not yet)."""
+        p = self.params
+        if c.n < p.reid_frames:
+            return None
+        mean = {tid: c.sums[tid] / c.counts[tid] for tid in c.sums}
+        best = max(c.candidates, key=lambda tid: mean.get(tid, -np.inf))
+        if mean.get(best, -np.inf) < p.reid_min:
+            return None
+        rest = [v for tid, v in mean.items() if tid != best]
+        return best if not rest or mean[best] - max(rest) >= p.reid_margin else None
+
+    def _give_back(self, t_ns: int, q: int, lost: int, states: list[TrackState]) -> list[TrackState]:
+        """New track ``q`` is lost track ``lost`` reborn: it takes that id from now on, and back to its birth
+        (:attr:`relabels`; from after the lost track's last state where the two overlap)."""
+        c = self._claims.pop(q)
+        lq = self._laser_id.pop(q, q)
+        self._alias[lq] = lost
+        self._laser_id[lost] = lq
+        del self._lost[lost]
+        for other in self._claims.values():
+            if lost in other.candidates:
+                other.candidates.remove(lost)
+        self._born.pop(q, None)
+        span_q, span_l = self._span.pop(q, [t_ns, t_ns]), self._span.get(lost)
+        from_ns = span_q[0] if span_l is None else max(span_q[0], span_l[1] + 1)
+        self._span[lost] = [span_l[0] if span_l is not None else span_q[0], t_ns]
+        if from_ns < t_ns:
+            self.relabels.append(Relabel(int(from_ns), int(t_ns), int(q), int(lost)))
+        # the lost identity's classifier goes on (it learnt the person longer); the new track's is dropped
+        self.bank.drop(q)
+        self._learnt_t.pop(q, None)
+        self._scored.pop(q, None)
+        for pair in [pair for pair in self._checks if q in pair]:
+            del self._checks[pair]
+        self._used.discard(q)
+        self._used.add(lost)
+        self.stats.reids += 1
+        mean = c.sums[lost] / c.counts[lost]
+        self.events.append(Event(t_ns, self.camera_name, "identity", t_ns, track_ids=(q, lost),
+                                 attributes={"reidentified": True, "from_ns": int(from_ns), "evidence": mean}))
+        return [dataclasses.replace(st, track_id=lost) if st.track_id == q else st for st in states]
 
     # ---------------------------------------------------------------------------------------------
     def _learn(self, t_ns: int, states: list[TrackState]) -> None:
@@ -668,7 +930,7 @@ class FusionTracker:
         """The laser tracks ``a`` and ``b`` follow each other's person: exchange their ids from now on and
         record the exchange since ``from_ns`` (:attr:`relabels`). False (nothing done) when the laser tracker
         cannot exchange them."""
-        if not self.laser.exchange_ids(a, b):
+        if not self.laser.exchange_ids(self._laser_id.get(a, a), self._laser_id.get(b, b)):
             return False
         for pair, c in self._checks.items():  # evidence gathered under the old ids no longer holds
             if a in pair or b in pair:
@@ -689,7 +951,7 @@ class FusionTracker:
         t_img = self.frames.nearest_time(t_ns)
         if t_img is None:
             return None
-        ids = [int(i) for i in track_ids]
+        ids = [self._out(i) for i in track_ids]
         todo = [k for k, tid in enumerate(ids) if self.bank.is_trained(tid) and self._scored.get(tid) != t_img]
         if not todo:
             return None
@@ -731,7 +993,9 @@ class FusionTracker:
 
     def _split_scores(self, t_ns: int, member_ids: tuple[int, ...], centres_m: np.ndarray) -> np.ndarray | None:
         """B17 hook: mean confidence ``(n_d, m)`` of each member's classifier over each piece's box, or None
-        (motion decides) without an image, an untrained member, an invisible piece or too small a margin."""
+        (motion decides) without an image, an untrained member, an invisible piece, too small a margin or a member
+        whose piece scores below ``s_min`` (B17 rejects such a pair; the laser tracker then goes by motion)."""
+        member_ids = tuple(self._out(tid) for tid in member_ids)
         if not all(self.bank.is_trained(tid) for tid in member_ids):
             return None
         if self.frames.nearest_time(t_ns) is None:
@@ -743,8 +1007,9 @@ class FusionTracker:
         boxes = self._boxes(centres_m)
         scores = None
         if np.isfinite(boxes).all():
-            s = self.bank.box_scores(img.pixels, boxes, member_ids)
-            if np.isfinite(s).all() and _assignment_gap(s) >= self.params.split_margin:
+            s = self.bank.box_scores(img.pixels, boxes, member_ids, exclusive=self.params.split_exclusive)
+            if (np.isfinite(s).all() and _assignment_gap(s) >= self.params.split_margin
+                    and _assigned_min(s) >= self.bank.params.min_score):
                 scores = s
         if scores is not None:
             self._used.update(member_ids)

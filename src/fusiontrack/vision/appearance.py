@@ -1033,7 +1033,7 @@ class AppearanceBank:
         return self.confidences(extract_features(img, patches, self.params.features), ids)
 
     def box_scores(self, image: Any, boxes_px: np.ndarray, ids: Iterable[int] | None = None,
-                   mask: np.ndarray | None = None) -> np.ndarray:
+                   mask: np.ndarray | None = None, exclusive: bool = False) -> np.ndarray:
         """Mean confidence of each target's classifier over B12 patches of each box (B17's ``score_jk``).
 
         Parameters
@@ -1044,12 +1044,15 @@ class AppearanceBank:
             Classifiers to use (all by default).
         mask : (H, W) bool, optional
             Foreground mask: only patches with at least ``min_foreground`` foreground pixels count.
+        exclusive : bool
+            Drop the patches centred in another of the boxes (B15's rule for training samples, applied to
+            scoring: where two boxes overlap, a patch may show either person).
 
         Returns
         -------
         (n_boxes, n_ids) float64
             NaN for a box that gives no patches (less than ``min_visible`` in the image, off it, or smaller
-            than a patch).
+            than a patch, or, ``exclusive``, covered by the other boxes).
         """
         img = validate_image(image, "image")
         rows = self._rows(ids)
@@ -1061,6 +1064,10 @@ class AppearanceBank:
         patches = sample_patches(boxes[vis], img.shape, self.params.patches, self.rng)
         if mask is not None:
             patches = patches.subset(self._on_mask(mask, img.shape, patches))
+        if exclusive and len(boxes) > 1:
+            inside = _inside(patches.centres_px, boxes)
+            inside[np.arange(len(patches)), vis[patches.box_index]] = False
+            patches = patches.subset(~inside.any(axis=1))
         conf = self.patch_scores(img, patches, rows)  # (n_ids, n_patches)
         count = np.bincount(patches.box_index, minlength=len(vis)).astype(np.float64)
         onehot = np.zeros((len(vis), len(patches)))
