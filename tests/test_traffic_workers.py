@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import sys
 from dataclasses import replace
 
 import numpy as np
@@ -78,6 +79,10 @@ def _die(image):
     os._exit(3)
 
 
+def _exit(image):
+    sys.exit(3)
+
+
 def _echo(image):
     return [image]
 
@@ -95,7 +100,8 @@ def _raise_unpicklable(image):
 @pytest.mark.parametrize(("branch", "raised", "message"), [
     (_raise_type_error, TypeError, "a bug in the branch"),
     (_raise_unpicklable, RuntimeError, "_Unpicklable: a bug with a lock"),
-    (_die, RuntimeError, "ended unexpectedly")])
+    (_die, RuntimeError, "ended unexpectedly"),
+    (_exit, RuntimeError, "SystemExit: 3")])  # not raised here as itself: it would end this process quietly
 def test_a_bug_in_a_worker_or_its_death_is_raised_in_the_main_process_not_waited_for(branch, raised, message):
     with CameraWorkers({"cam": branch}, 1) as pool:
         job = pool.submit("cam", 1)
@@ -103,6 +109,7 @@ def test_a_bug_in_a_worker_or_its_death_is_raised_in_the_main_process_not_waited
             pool.wait(job)
     if branch is _raise_type_error:  # the worker's exception, of its own type, its traceback chained as the cause
         assert "_raise_type_error" in str(info.value.__cause__)
+        assert any("camera worker 0" in note for note in info.value.__notes__)
     assert not mp.active_children()
 
 

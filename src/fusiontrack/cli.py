@@ -320,8 +320,8 @@ PIPELINES = {
     "people-laser": "people tracked with 2D lasers (seed 001's laser side)",
     "people-camera": "people tracked in one camera's images: foreground blobs, or a MOTChallenge detection file",
     # seed 001's fused pipeline (fusiontrack.fusion): needs LaserScan topics and one calibrated camera
-    "people": "people tracked with 2D lasers and a camera: per-target classifiers learnt online name the "
-              "people at splits (seed 001's tracking-learning loop)",
+    "people": "people tracked with 2D lasers and a camera: per-target classifiers learnt online check identities "
+              "after close contact and re-identify reborn tracks (seed 001's tracking-learning loop)",
     # seed 003 (fusiontrack.fusion.traffic): lasers and cameras on a road, vehicle models, incidents
     # seed 002 (fusiontrack.fusion.wearable): phones (IMU) + RGB-D cameras
     "wearable": "people identified by the phone they carry: dead reckoning corrected by RGB-D fixes, visual "

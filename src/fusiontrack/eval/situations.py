@@ -258,6 +258,8 @@ def segment_frames(path: str | Path, *, clock_corrections_ns: Mapping[str, int] 
     fusiontrack.errors.RecordingError
         The recording has no per-beam truth (simulated before the simulator wrote it), or it does not match
         the scans.
+    fusiontrack.errors.EvaluationError
+        The recording has no LaserScan topic or no ``/ground_truth``.
     """
     from ..errors import RecordingError
     from ..io.recording import LASERSCAN, Recording
@@ -300,6 +302,8 @@ def segment_frames(path: str | Path, *, clock_corrections_ns: Mapping[str, int] 
                     local = (points[sel] - trans) @ rot
                     bearing = np.arctan2(local[:, 1], local[:, 0])
                     beam = np.rint(np.mod(bearing - angle0, 2 * np.pi) / inc).astype(np.int64)
+                    if abs(inc * hit_ids.size - 2 * np.pi) < inc:  # a full circle: the last beam is next to the first
+                        beam %= hit_ids.size
                     ok = (beam >= 0) & (beam < hit_ids.size)
                     agent[sel[ok]] = hit_ids[beam[ok]]
                 col = np.searchsorted(np.sort(ids), agent)

@@ -1,12 +1,15 @@
 """Laser + camera fusion: seed 001's tracking-learning loop (ALGORITHMS.md B11, B15, B16, B17, B19).
 
-* :class:`FusionTracker` — the laser people tracker whose correlated targets are also weighted by the score
-  maps of online per-target appearance classifiers, whose merged targets get their identities back from those
-  classifiers when they split, and whose noncorrelated targets train them;
+* :class:`FusionTracker` — the laser people tracker whose noncorrelated targets train online per-target
+  appearance classifiers; those classifiers check identities after close contact (exchanging them back when
+  the laser swapped them) and give a reborn track the id of the person it recognises. Optional (off by default,
+  :class:`FusionParams`): their score maps as the observation of correlated targets (B16) and the identities of
+  the pieces of a split decided by appearance (B17);
 * :func:`track_fused` — the same over a recording (the ``people`` pipeline of ``fusiontrack track``), through
   the camera corrected by the horizontal bias it first learns against the lasers (:func:`learn_camera_bias`,
   seed 000);
-* :func:`relabel_states` — applies the identity checks' exchanges (:class:`Relabel`) to states already output;
+* :func:`relabel_states` — applies the identity decisions (:class:`Relabel`: exchanges and re-identifications)
+  to states already output;
 * :class:`LazyFrames` — a recording's camera images, converted only when the tracker needs one.
 """
 

@@ -410,8 +410,9 @@ class _Claim:
 
 @dataclass(frozen=True, slots=True)
 class Relabel:
-    """Two tracks' identities exchanged by an identity check: ``a`` and ``b`` swap in ``[from_ns, to_ns)``
-    (the tracker's own ids are exchanged from ``to_ns`` on)."""
+    """Two ids exchanged in ``[from_ns, to_ns)`` (the tracker's own ids change from ``to_ns`` on): by an identity
+    check (``a`` and ``b`` followed each other's person), or by a re-identification (new track ``a`` is lost track
+    ``b`` reborn; ``b`` has no state in the window, so the exchange names ``a``'s states ``b``)."""
 
     from_ns: int
     to_ns: int
@@ -420,8 +421,8 @@ class Relabel:
 
 
 def relabel_states(states: Sequence[TrackState], relabels: Sequence[Relabel]) -> list[TrackState]:
-    """``states`` with the identity exchanges applied, in the order they were decided (each one names tracks by
-    the ids in force once the earlier ones are applied)."""
+    """``states`` with the identity decisions (exchanges, re-identifications) applied, in the order they were
+    decided (each one names tracks by the ids in force once the earlier ones are applied)."""
     if not relabels or not states:
         return list(states)
     t = np.array([st.t_ns for st in states], np.int64)
@@ -568,8 +569,8 @@ class FusionTracker:
             if any(t in self._alias for t in e.track_ids):
                 attrs = e.attributes
                 if "parts" in attrs:
-                    attrs = {**attrs, "parts": tuple(tuple(sorted(self._out(t) for t in part))
-                                                     for part in attrs["parts"])}
+                    attrs = {**attrs, "parts": tuple(sorted(tuple(sorted(self._out(t) for t in part))
+                                                            for part in attrs["parts"]))}
                 e = dataclasses.replace(e, track_ids=tuple(self._out(t) for t in e.track_ids), attributes=attrs)
             out.append(e)
         return out
@@ -935,6 +936,8 @@ class FusionTracker:
         for pair, c in self._checks.items():  # evidence gathered under the old ids no longer holds
             if a in pair or b in pair:
                 c.evidence, c.n = 0.0, 0
+        for tid in (a, b):  # a claim's summed scores would mix two people
+            self._claims.pop(tid, None)
         self.relabels.append(Relabel(int(from_ns), int(t_ns), int(a), int(b)))
         self.stats.exchanges += 1
         self.events.append(Event(t_ns, self.camera_name, "identity", t_ns, track_ids=(a, b),
@@ -1172,10 +1175,12 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
     Returns
     -------
     states : list of TrackState
-        With the identity checks' exchanges applied (:func:`relabel_states`).
+        With the identity decisions applied (:func:`relabel_states`).
     events : list of Event
-        The laser tracker's, plus one ``identity`` event (``track_ids`` = the pair, ``attributes``: ``from_ns``,
-        ``evidence``) per exchange; earlier merge/split events keep the ids of their time. With a learnt bias,
+        The laser tracker's, plus one ``identity`` event per decision: an exchange (``track_ids`` = the pair,
+        ``attributes``: ``exchanged``, ``from_ns``, ``evidence``) or a re-identification (``track_ids`` = (new
+        id, the lost id it takes), ``attributes``: ``reidentified``, ``from_ns``, ``evidence``); earlier
+        merge/split events keep the ids of their time. With a learnt bias,
         first one ``camera_bias`` event over the frames it was learnt on (``attributes``: ``bias_deg``,
         ``updates``, ``settled``, ``applied``).
     stats : FusionStats

@@ -231,9 +231,14 @@ class CameraWorkers:
                                f"{self._procs[i].exitcode})") from None
         if status == "crash":
             remote = _RemoteTraceback(f"camera worker {i} failed:\n{payload}")
-            if error is not None:  # the worker's own exception, of its own type, with the worker's traceback
-                raise pickle.loads(error) from remote
-            raise RuntimeError(f"camera worker {i} failed:\n{payload}")
+            exc = pickle.loads(error) if error is not None else None
+            # The worker's own exception, of its own type, with the worker's traceback as its cause; not a
+            # SystemExit / KeyboardInterrupt (they would end this process quietly) nor the bad-data types the
+            # caller skips (a crash must not pass for one bad frame).
+            if isinstance(exc, Exception) and not isinstance(exc, (ValueError, FloatingPointError)):
+                exc.add_note(f"raised in camera worker {i} ({self._procs[i].name})")
+                raise exc from remote
+            raise RuntimeError(f"camera worker {i} ({self._procs[i].name}) failed:\n{payload}") from remote
         job = self._pending[i].popleft()
         job.detections, job.error, job.cpu_s, job.wall_s, job.done = payload, error, cpu, wall, True
         self.cpu_s += cpu

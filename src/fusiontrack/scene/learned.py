@@ -14,7 +14,8 @@ Events have the interface of the rules (:class:`LearnedSceneUnderstanding` with 
 :func:`detect_events_learned`): a track's ``stopped_vehicle`` / ``road_leaving`` / ``wrong_way`` event starts once the
 forest says so with confidence >= ``p_min`` for ``on_s`` (0.25 s: two evaluations), in windows that a sensor mostly
 confirmed (``min_measured``), and ends once it has not for ``off_s``; a ``jam`` event of a lane zone starts once >=
-``jam_min_tracks`` of its vehicles are classified ``jam``. ``t_ns`` is the first positive evaluation,
+``jam_min_tracks`` of its vehicles are classified ``jam`` (also only in windows a sensor mostly confirmed: a
+vehicle the tracker only extrapolates does not count towards a jam). ``t_ns`` is the first positive evaluation,
 ``attributes["alarm_t_ns"]`` the alarm. A track's event that starts where an event of the same kind is going on or ended
 moments ago continues it (``rejoin_m``, ``rejoin_s``): one incident, one event, also when the tracker loses a stopped
 vehicle and finds it again.
@@ -424,7 +425,7 @@ class LearnedSceneUnderstanding:
     min_measured : float — least share of a window's states that a sensor confirmed (``measured_frac``) for a
         positive evaluation. A window made mostly of the tracker's extrapolation shows how the tracker coasts, not
         how the vehicle behaves (the D8 rules count only measured states for road leaving likewise). 0.5: a
-        majority.
+        majority. It applies to the ``jam`` count as well (measured with it: jam P = R = 1 on the tracked runs).
     on_s, off_s : float — a positive class must hold ``on_s`` to start an event, be absent ``off_s`` to end it
     jam_min_tracks : int — vehicles of a lane zone classified ``jam`` that make a jam
     rejoin_m, rejoin_s : float — a track's new event lying within ``rejoin_m`` of an event of the same kind

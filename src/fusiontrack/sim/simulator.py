@@ -260,7 +260,8 @@ class Simulation:
         if isinstance(sim, LaserSim):
             scan, hit_ids = sim.scan_and_hits(cap.t_ns, snap, rng, stamp_ns=cap.stamp_ns)
             writer.write(scan, log_t_ns=cap.log_ns)
-            self._laser_hits[name].append((cap.t_ns, cap.stamp_ns, hit_ids.astype(np.int32)))
+            small = hit_ids.size == 0 or hit_ids.max() <= np.iinfo(np.int16).max  # 2 bytes per beam while it runs
+            self._laser_hits[name].append((cap.t_ns, cap.stamp_ns, hit_ids.astype(np.int16 if small else np.int32)))
         elif isinstance(sim, CameraSim):
             out = sim.render((cap.t_ns - T0_NS) / 1e9, snap, rng)
             writer.write(sim.camera_info(cap.stamp_ns), log_t_ns=cap.log_ns)
