@@ -41,7 +41,8 @@ def test_truncated_ros1_bag(shared_data, tmp_path, keep):
     data = src.read_bytes()
     cut = tmp_path / "cut.bag"
     cut.write_bytes(data[: int(len(data) * keep)])
-    with pytest.raises(RecordingError, match=r"cut\.bag.*(complete|corrupt|truncated)"), Recording(cut) as rec:
+    with pytest.raises(RecordingError, match=r"cut\.bag.*(complete|corrupt|truncated).*"
+                       r'run "fusiontrack repair .*cut\.bag -o .*" to recover'), Recording(cut) as rec:
         list(rec.messages())
 
 
@@ -52,7 +53,8 @@ def test_truncated_mcap(tmp_path):
     (mcap,) = (tmp_path / "rec").glob("*.mcap")
     data = mcap.read_bytes()
     mcap.write_bytes(data[: len(data) // 2])
-    with pytest.raises(RecordingError, match=r"rec"), Recording(tmp_path / "rec") as rec:
+    with pytest.raises(RecordingError, match=r"rec.*(complete|corrupt|truncated).*fusiontrack repair .*rec -o"), \
+            Recording(tmp_path / "rec") as rec:
         list(rec.messages())
 
 
@@ -191,7 +193,7 @@ def test_cli_version():
 def test_cli_help_on_every_command():
     result = _cli("--help")
     assert result.returncode == 0
-    expected = ["info", "convert", "view", "scenarios", "simulate", "demo"]
+    expected = ["info", "convert", "repair", "view", "scenarios", "simulate", "demo"]
     commands = [c for c in expected if c in result.stdout]
     assert commands == expected
     for cmd in commands:

@@ -224,6 +224,21 @@ def convert(
                   + (f" ({sum(rec.skipped.values())} unreadable skipped)" if rec.skipped else ""))
 
 
+@app.command()
+def repair(
+    recording: Annotated[Path, typer.Argument(help="A truncated or damaged ROS 1 .bag, .mcap file or rosbag2 "
+                                                   "folder of .mcap files.")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="The new recording: a .bag file for a ROS 1 bag, "
+                                         "a rosbag2 folder (MCAP) for MCAP.")],
+) -> None:
+    """Recover every complete message of a cut-off or damaged recording into a new one (as rosbag reindex and
+    mcap recover do): the records are read from the start, up to the first incomplete or corrupt one."""
+    from .io.recover import repair_recording
+
+    report = repair_recording(recording, output)
+    console.print(escape(report.summary()), highlight=False, soft_wrap=True)
+
+
 # --------------------------------------------------------------------------------------------------
 # view
 # --------------------------------------------------------------------------------------------------

@@ -27,6 +27,7 @@ from rosbags.interfaces import Connection
 
 from ..errors import MessageTypeError, RecordingError, TopicError
 from ..types import Message
+from .recover import recording_kind
 from .ros import (
     FROM_ROS,
     HEADERLESS,
@@ -74,10 +75,23 @@ class TopicInfo:
 
 def _describe_open_error(path: Path, err: BaseException) -> str:
     text = " ".join(str(a) for a in err.args) or type(err).__name__
-    if path.is_file() and path.suffix not in (".bag", ".mcap", ".db3"):
+    hint = _repair_hint(path)
+    if path.is_file() and path.suffix not in (".bag", ".mcap", ".db3") and not hint:
         return (f"{path}: not a recording fusiontrack can open (expected a ROS 1 .bag, a ROS 2 bag folder, "
                 f"a .mcap or a .db3 file): {text}")
-    return f"{path}: cannot open the recording ({text}); is it complete and not corrupt?"
+    return f"{path}: cannot open the recording ({text}); is it complete and not corrupt?" + (
+        f" If not, {hint}" if hint else "")
+
+
+def _repair_hint(path: Path) -> str:
+    """How to recover the messages of a damaged ROS 1 bag or MCAP ("" for anything else)."""
+    kind = recording_kind(path)
+    if kind is None:
+        return ""
+    name = path.name.removesuffix(".active")  # rosbag record's name for a bag still being written
+    stem = name.removesuffix(".bag") if kind == "ros1" else name.removesuffix(".mcap")
+    out = path.with_name(f"{stem}_repaired" + (".bag" if kind == "ros1" else ""))
+    return f'run "fusiontrack repair {path} -o {out}" to recover the messages it holds'
 
 
 class Recording:
@@ -308,9 +322,11 @@ class Recording:
         try:
             yield from it
         except Exception as err:
+            hint = _repair_hint(Path(reader.paths[0])) if len(reader.paths) == 1 else ""
             raise RecordingError(
                 f"{', '.join(str(p) for p in reader.paths)}: reading stopped part-way "
                 f"({' '.join(map(str, err.args)) or type(err).__name__}); the file is truncated or corrupt"
+                + (f"; {hint}" if hint else "")
             ) from err
 
     def raw_messages(
