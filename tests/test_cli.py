@@ -186,7 +186,7 @@ def test_track_and_eval_the_real_outdoor_bag(outdoor_bag, tmp_path):
     run("eval", str(out), str(outdoor_bag), "--time", "log", "--threshold", "0.75", "-o", str(metrics_json))
     metrics = json.loads(metrics_json.read_text())["metrics"]
     assert metrics["recall"] > 0.95  # the followed person is tracked on almost every annotated scan
-    assert metrics["mota"] > 0.85  # measured 0.885; the issue's target of 0.9 needs the leg classifier
+    assert metrics["mota"] >= 0.9  # the issue's target with the annotators' 0.75 m
 
 
 def test_pdr_counts_the_steps_of_a_real_trace(shared_data, tmp_path):
