@@ -135,7 +135,8 @@ def test_camera_blackout_leaves_laser_tracking_intact_and_learning_resumes(pair)
 
 
 def test_fusion_tracker_without_interaction_never_reads_the_camera():
-    """Two people 5 m apart: nobody needs the camera, so no image is read (seed 001's cost argument)."""
+    """Two people 5 m apart: nobody needs the camera, so no image is read (seed 001's cost argument; learning alone,
+    ``learn_all_s``, would read an image now and then for people that nobody comes near: it is off by default)."""
 
     class Frames:
         def __init__(self) -> None:
@@ -828,3 +829,60 @@ def test_split_identity_needs_every_member_to_recognise_its_piece(scores, decide
     s = np.asarray(scores)
     assert _assigned_min(s) == pytest.approx(min(s[0, 0], s[1, 1]))  # the best assignment is the diagonal
     assert _assignment_gap(s) == pytest.approx(np.trace(s) - np.trace(s[::-1]))
+
+
+@pytest.mark.parametrize("learn_all_s", [1.5, None], ids=["learning-alone", "B15-only"])
+def test_lone_person_lost_by_the_laser_is_reborn_under_the_old_id_when_everyone_learns(crowd, learn_all_s,
+                                                                                        monkeypatch):
+    """The crowd's person who stays farthest from everybody (never within B15's 1.5 m: B15 never trains a
+    classifier of theirs) vanishes from the lasers for 1.8 s (their detections are dropped), so the laser tracker
+    loses them and a new track is born when they reappear. Learning alone (``learn_all_s``) gave the lost track a
+    classifier: the reborn track takes the old id back; without it, it keeps a new one. Truth: the simulator's
+    floor positions (which track follows the person before and after)."""
+    from fusiontrack.laser.detector import LaserPeopleDetector
+
+    gt = crowd["gt"]
+    gt_t = np.array([g.t_ns for g in gt])
+    t_first = gt[0].t_ns
+    b0, b1 = t_first + 9_600_000_000, t_first + 11_400_000_000  # the blank (the laser needs 1 s to lose a track)
+    before_blank = [g for g in gt if g.t_ns < b0]
+    agents = set.intersection(*(set(g.ids.tolist()) for g in gt if b0 - 7e9 <= g.t_ns <= b1 + 2e9))
+
+    def nearest_other_m(agent: int) -> float:
+        d = [np.linalg.norm(g.positions_m[g.ids != agent] - g.positions_m[g.ids == agent], axis=1).min()
+             for g in before_blank if agent in g.ids and len(g.ids) > 1]
+        return float(min(d))
+
+    agent = max(sorted(agents), key=nearest_other_m)
+    assert nearest_other_m(agent) > FusionParams().d_train_m  # alone all along: B15 never trained them
+    detect = LaserPeopleDetector.detect
+
+    def blanked(self, t_ns: int) -> list:
+        dets = detect(self, t_ns)
+        if not b0 <= t_ns <= b1:
+            return dets
+        g = gt[int(np.argmin(np.abs(gt_t - t_ns)))]
+        xy = g.positions_m[np.flatnonzero(g.ids == agent)[0]]
+        return [d for d in dets if np.hypot(*(d.position_m - xy)) > 0.8]
+
+    monkeypatch.setattr(LaserPeopleDetector, "detect", blanked)
+    states, events, stats = track_fused(crowd["path"], params=FusionParams(learn_all_s=learn_all_s),
+                                        tracker_params=SIM_PF, camera=crowd["used"][0], adaptive_bias=False,
+                                        **crowd["kw"])
+    before = _track_at(states, gt, agent, b0 - 600_000_000)
+    after = _track_at(states, gt, agent, b1 + 1_600_000_000)
+    assert before is not None
+    assert after is not None
+    lost = [e for e in events if e.kind == "lost" and before in e.track_ids]
+    assert lost
+    assert b0 <= lost[0].t_end_ns <= b1  # the laser did lose them (inside the area) during the blank
+    assert not any(s.track_id == before for s in states if lost[0].t_end_ns <= s.t_ns < b1)  # nobody has the id
+    if learn_all_s:
+        assert stats.train_alone > 0
+        assert after == before  # reborn under the old id
+        (reid,) = [e for e in events if e.kind == "identity" and e.attributes.get("reidentified")
+                   and e.track_ids[1] == before]
+        assert reid.t_ns > b1
+    else:
+        assert stats.train_alone == 0
+        assert after != before

@@ -38,7 +38,8 @@
    the camera image nearest in time: positives from its projected box (B11), negatives from the boxes of
    its ``L`` closest targets (patches centred in another box are dropped); at most once every
    ``train_interval_s``; merged targets' classifiers are frozen, and so is a voter of a pending identity check
-   (its track could be following the other person).
+   (its track could be following the other person). And (``FusionParams.learn_all_s``) the targets B15 never
+   trains, nobody ever near them, learn alone now and then, for re-identification only.
 
 The camera image is converted only when one of these needs it (:class:`~fusiontrack.fusion.frames.LazyFrames`),
 so with no interaction the fused tracker costs what the laser one costs. Each output state names the sensors
@@ -165,6 +166,25 @@ class FusionParams:
         Clear images a re-identification needs [RECON].
     reid_min, reid_margin : float
         See ``reid`` (confidences are in [-1, 1]) [RECON].
+    learn_all_s : float or None
+        Targets that never had anybody within ``d_train_m`` (so B15 never trains them) learn alone now and then
+        [RECON, extends B15], so that when the laser loses such a person its reborn track can be re-identified:
+        a noncorrelated target with a clear box (``max_overlap``) mostly in the image (``check_visible``) learns
+        at most about once every ``learn_all_s`` (not before ``learn_all_s / 2`` since its last time: on an image
+        read at that step anyway; an image is read for them only when one of them is ``learn_all_s`` overdue);
+        negatives: its ``L`` closest targets in the image, wherever they are. Its classifier only serves
+        re-identification (a lost candidate, or a live alternative): it never votes in an identity check, it
+        draws its patches from a random stream of its own, and it is dropped when the target first learns as
+        B15's learner (B15's starts afresh), so B15's classifiers and the checks are what they are without it.
+        None (the default): only B15's learners learn (seed 001: the camera is read only for targets that need it).
+        On ``benchmarks/fusion.py`` (crowd + groups, 30 s), 1.5 s with ``reid_min_alone`` 0.25: ID switches
+        17 -> 16 on seeds 0-2 and 22 -> 21 on seeds 3-5 (laser-only: 18, 20), no wrong re-identification added,
+        +0.02-0.10x laser-only's time (most rebirths there happen at the area's edge, ``disappear``, which
+        re-identification leaves alone). Off by default: one switch in twenty is within the runs' noise, and it
+        reads the camera for everybody.
+    reid_min_alone : float or None
+        ``reid_min`` for a lost candidate whose classifier learnt alone (``learn_all_s``; fewer, less varied
+        training images: its confidence on its own person is lower) [RECON]; None: ``reid_min``.
     height_m, width_ratio : float
         B11's person box (``H_p``, ``r_w``).
     max_frame_dt_s : float
@@ -195,6 +215,8 @@ class FusionParams:
     reid_frames: int = 3
     reid_min: float = 0.4
     reid_margin: float = 0.3
+    learn_all_s: float | None = None
+    reid_min_alone: float | None = 0.25
     height_m: float = 1.70
     width_ratio: float = 0.40
     max_frame_dt_s: float = 0.05
@@ -217,6 +239,15 @@ class FusionParams:
                 raise ConfigError(f"FusionParams.{name}: expected a finite value >= 0, got {v!r}")
         if self.height_m <= 0 or self.width_ratio <= 0:
             raise ConfigError("FusionParams.height_m, width_ratio: expected values > 0")
+        if self.learn_all_s is not None and not (isinstance(self.learn_all_s, int | float)
+                                                 and not isinstance(self.learn_all_s, bool)
+                                                 and np.isfinite(self.learn_all_s) and self.learn_all_s > 0):
+            raise ConfigError(f"FusionParams.learn_all_s: expected None or a finite value > 0, got "
+                              f"{self.learn_all_s!r}")
+        if self.reid_min_alone is not None and not (isinstance(self.reid_min_alone, int | float)
+                                                    and -1 <= self.reid_min_alone <= 1):
+            raise ConfigError(f"FusionParams.reid_min_alone: expected None or a confidence in [-1, 1], got "
+                              f"{self.reid_min_alone!r}")
         if not (isinstance(self.reid_min, int | float) and -1 <= self.reid_min <= 1):
             raise ConfigError(f"FusionParams.reid_min: expected a confidence in [-1, 1], got {self.reid_min!r}")
 
@@ -316,6 +347,8 @@ class FusionStats:
     steps: int = 0
     frames_used: int = 0  # distinct camera images read
     train_frames: int = 0  # (step, image) pairs the bank learnt from
+    train_alone: int = 0  # (target, image) samples of targets learning with nobody near (learn_all_s)
+    frames_alone: int = 0  # images read for those targets alone
     train_updates: int = 0  # classifier ensemble updates
     score_maps: int = 0  # B16 score maps computed
     splits: int = 0  # splits seen
@@ -509,7 +542,14 @@ class FusionTracker:
         self._used: set[int] = set()  # ids whose step used the camera
         self._scored: dict[int, int] = {}  # id -> time of the image last used for its score map
         self._learnt_t: dict[int, int] = {}  # id -> time of its last training step
+        self._learnt_near: set[int] = set()  # ids that learnt as B15's learners (another target near)
+        # learning alone (``learn_all_s``): the ids whose classifier learnt only so, when they last learnt, and the
+        # random stream of their patches (B15's learning draws from the bank's own as without it)
+        self._alone: set[int] = set()
+        self._alone_t: dict[int, int] = {}
+        self._rng_alone = r_bank.spawn(1)[0] if p.learn_all_s else None
         self._frames_seen: set[int] = set()
+        self._read_ns = -1  # the last laser step that read an image (it is cached: another read is free)
         self._checks: dict[tuple[int, int], _Check] = {}
         self.relabels: list[Relabel] = []
         # re-identification: the laser tracker keeps its own ids; a reborn track's output id is the lost one's
@@ -579,6 +619,7 @@ class FusionTracker:
     def _image(self, t_ns: int) -> Image | None:
         t0 = time.perf_counter()
         img = self.frames.at(t_ns)
+        self._read_ns = t_ns
         if img is not None and img.t_ns not in self._frames_seen:
             self._frames_seen.add(img.t_ns)
             self.stats.frames_used += 1
@@ -602,6 +643,10 @@ class FusionTracker:
                 for tid in e.track_ids:
                     self._scored.pop(tid, None)
                     self._learnt_t.pop(tid, None)
+                    self._alone_t.pop(tid, None)
+                    if tid not in self._lost:
+                        self._learnt_near.discard(tid)
+                        self._alone.discard(tid)
             elif e.kind == "split":
                 self.stats.splits += 1
                 if e.attributes.get("identity") == "appearance":
@@ -642,6 +687,8 @@ class FusionTracker:
         for tid in [tid for tid, lost in self._lost.items() if t_ns - lost[1] > horizon]:
             del self._lost[tid]
             self.bank.drop(tid)
+            self._learnt_near.discard(tid)
+            self._alone.discard(tid)
             self._span.pop(tid, None)
             for c in self._claims.values():
                 if tid in c.candidates:
@@ -724,7 +771,8 @@ class FusionTracker:
             return None
         mean = {tid: c.sums[tid] / c.counts[tid] for tid in c.sums}
         best = max(c.candidates, key=lambda tid: mean.get(tid, -np.inf))
-        if mean.get(best, -np.inf) < p.reid_min:
+        lowest = p.reid_min_alone if p.reid_min_alone is not None and best in self._alone else p.reid_min
+        if mean.get(best, -np.inf) < lowest:
             return None
         rest = [v for tid, v in mean.items() if tid != best]
         return best if not rest or mean[best] - max(rest) >= p.reid_margin else None
@@ -749,6 +797,9 @@ class FusionTracker:
         # the lost identity's classifier goes on (it learnt the person longer); the new track's is dropped
         self.bank.drop(q)
         self._learnt_t.pop(q, None)
+        self._learnt_near.discard(q)
+        self._alone.discard(q)
+        self._alone_t.pop(q, None)
         self._scored.pop(q, None)
         for pair in [pair for pair in self._checks if q in pair]:
             del self._checks[pair]
@@ -762,7 +813,8 @@ class FusionTracker:
 
     # ---------------------------------------------------------------------------------------------
     def _learn(self, t_ns: int, states: list[TrackState]) -> None:
-        """B15: noncorrelated targets with another target within ``d_train_m`` learn from this image."""
+        """B15: noncorrelated targets with another target within ``d_train_m`` learn from this image; with
+        ``learn_all_s``, the targets that never had anybody near learn alone now and then (:meth:`_learn_alone`)."""
         p = self.params
         pos = np.array([s.position_m for s in states])
         ids = np.array([s.track_id for s in states])
@@ -774,14 +826,21 @@ class FusionTracker:
         interval = p.train_interval_s * 1e9
         # an untrained target learns from every image, a trained one every ``train_interval_s``
         # a voter of a pending identity check does not learn (it could be learning the other one)
+        # (a classifier learnt alone does not count: B15 starts the target's own afresh)
         waiting = {tid for c in self._checks.values() for tid in c.voters}
         learners = [k for k, s in enumerate(states)
                     if near[k] and s.situation in _LEARNING and s.sensors
-                    and (not self.bank.is_trained(s.track_id)
+                    and (not self.bank.is_trained(s.track_id) or s.track_id in self._alone
                          or (t_ns - self._learnt_t.get(s.track_id, -(1 << 62)) >= interval
                              and s.track_id not in waiting))]
-        if not learners:
-            return
+        if learners:
+            self._learn_near(t_ns, learners, pos, ids, d)
+        if p.learn_all_s:
+            self._learn_alone(t_ns, states, pos, ids, d, near)
+
+    def _learn_near(self, t_ns: int, learners: list[int], pos: np.ndarray, ids: np.ndarray, d: np.ndarray) -> None:
+        """B15's learning of the rows ``learners`` (targets with another one within ``d_train_m``)."""
+        p = self.params
         if self.frames.nearest_time(t_ns) is None:
             return  # no image now (camera blackout, or between frames): the laser goes on alone
         t0 = time.perf_counter()
@@ -803,6 +862,10 @@ class FusionTracker:
         boxes_by_id = {int(ids[k]): boxes[k] for k in rows}
         positions = {int(ids[k]): pos[k] for k in rows}
         train_ids = [int(ids[k]) for k in learners]
+        if self._alone:  # B15's classifier of a target that learnt alone so far starts afresh
+            fresh = self._alone.intersection(train_ids)
+            self.bank.drop(fresh)
+            self._alone.difference_update(fresh)
         # a target's first classifier is fitted at once (B15's cadence would wait 5 frames: often too late, the
         # targets are merged by then)
         first = any(not self.bank.is_trained(tid) for tid in train_ids)
@@ -810,8 +873,74 @@ class FusionTracker:
                                   force_update=first)
         for tid in train_ids:
             self._learnt_t[tid] = t_ns
+        self._learnt_near.update(train_ids)
         self._used.update(train_ids)
         self.stats.train_frames += 1
+        self.stats.train_updates += len(updated)
+        self.stats.camera_s += time.perf_counter() - t0
+
+    def _learn_alone(self, t_ns: int, states: list[TrackState], pos: np.ndarray, ids: np.ndarray, d: np.ndarray,
+                     near: np.ndarray) -> None:
+        """``learn_all_s``: the noncorrelated targets that never learnt as B15's learners (nobody was ever within
+        ``d_train_m``) learn alone, so that a reborn track of theirs can be re-identified.
+
+        Such a target learns when its box is clear (``max_overlap``) and mostly in the image (``check_visible``),
+        at least ``learn_all_s / 2`` after its last time: on an image read at this step anyway, or when one of them
+        is ``learn_all_s`` overdue (an image is then read for them). Negatives: its ``L`` closest targets in the
+        image (B15's ``n_confusers``), wherever they are, and whoever's box overlaps its own. The patches are drawn
+        from a random stream of their own, so that B15's learning and the checks draw what they draw without
+        it. Its classifier is dropped when the target first learns as B15's learner (B15's starts afresh)."""
+        p = self.params
+        every = p.learn_all_s * 1e9
+        since = np.array([t_ns - self._alone_t.get(int(tid), -(1 << 62)) for tid in ids])
+        rows = [k for k, s in enumerate(states) if not near[k] and s.situation in _LEARNING and s.sensors
+                and int(ids[k]) not in self._learnt_near and since[k] >= every / 2]
+        if not rows or self.camera is None:
+            return
+        anyway = self._read_ns == t_ns
+        if not (anyway or (since[rows] >= every).any()):
+            return
+        t_img = self.frames.nearest_time(t_ns)
+        if t_img is None:
+            return
+        t0 = time.perf_counter()
+        boxes = self._boxes(pos)
+        ok = np.isfinite(boxes).all(axis=1)
+        vis = box_visibility(boxes, (self.camera.height, self.camera.width))
+        clear = ok & (_occlusion(boxes, ok) <= p.max_overlap) & (vis >= p.check_visible)
+        learners = [k for k in rows if clear[k]]
+        seen = ok & (vis >= self.bank.params.patches.min_visible)
+        if not learners or np.count_nonzero(seen) < 2 or not (anyway or (since[learners] >= every).any()):
+            self.stats.camera_s += time.perf_counter() - t0
+            return
+        img = self._image(t_ns)
+        if img is None:  # (unreadable: not again at every step)
+            self._alone_t.update((int(ids[k]), t_ns) for k in learners)
+            self.stats.camera_s += time.perf_counter() - t0
+            return
+        self.stats.frames_alone += not anyway
+        involved = np.zeros(len(ids), bool)
+        lb = boxes[learners]
+        overlap = ((boxes[:, None, :2] < lb[None, :, 2:]) & (lb[None, :, :2] < boxes[:, None, 2:])).all(axis=2)
+        involved |= ok & overlap.any(axis=1)
+        for k in learners:
+            others = [j for j in np.argsort(d[k], kind="stable") if seen[j] and j != k]
+            involved[others[: self.bank.params.n_confusers]] = True
+        involved[learners] = True
+        rows_in = np.flatnonzero(involved)
+        train_ids = [int(ids[k]) for k in learners]
+        first = any(not self.bank.is_trained(tid) for tid in train_ids)
+        bank_rng, self.bank.rng = self.bank.rng, self._rng_alone
+        try:
+            updated = self.bank.train(img.pixels, {int(ids[k]): boxes[k] for k in rows_in}, train_ids=train_ids,
+                                      positions_m={int(ids[k]): pos[k] for k in rows_in}, force_update=first)
+        finally:
+            self.bank.rng = bank_rng
+        for tid in train_ids:
+            self._alone_t[tid] = t_ns
+        self._alone.update(train_ids)
+        self._used.update(train_ids)
+        self.stats.train_alone += len(train_ids)
         self.stats.train_updates += len(updated)
         self.stats.camera_s += time.perf_counter() - t0
 
@@ -852,7 +981,8 @@ class FusionTracker:
             if c is None or not c.voters:
                 # a classifier trained only after the contact may have learnt the other person: it never votes.
                 # A check without voters is (re)opened at each contact until one of the two has a classifier.
-                voters = frozenset(tid for tid in pair if self.bank.is_trained(tid))
+                # (a classifier that learnt alone, ``learn_all_s``, never saw a person near its own: no voter)
+                voters = frozenset(tid for tid in pair if self.bank.is_trained(tid) and tid not in self._alone)
                 checks[pair] = _Check(t_ns, dist, t_ns, voters, split or (c is not None and c.split_seen))
                 continue
             if c.decided:  # a decided pair still or again in contact: checked again, by the same voters (a
