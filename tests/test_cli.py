@@ -212,7 +212,7 @@ def test_train_classifier_writes_a_model_that_loads(shared_data, tmp_path):
 
     target = tmp_path / "model.json"
     out = run("train-classifier", "-o", str(target), "--work", str(tmp_path / "work"), "--data", str(shared_data),
-              "--crowd-seconds", "12", "--road-seconds", "30", "--rounds", "20").stdout
+              "--crowd-seconds", "6", "--road-seconds", "20", "--rounds", "20").stdout
     assert "balanced accuracy" in out
     model = ObjectClassifier.load(target)
     assert model.classes == ("person", "bicycle", "car")
