@@ -633,6 +633,18 @@ class FusionTracker:
             return np.full((len(positions_m), 4), np.nan)
         return self.camera.person_box(positions_m, self.params.height_m, self.params.width_ratio)
 
+    def _clear_boxes(self, positions_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(boxes, finite, clear): B11's boxes at ``positions_m``, which are finite, and which a classifier can
+        judge: finite, mostly inside the image (``check_visible``) and not largely inside another box
+        (``max_overlap``)."""
+        p = self.params
+        boxes = self._boxes(positions_m)
+        finite = np.isfinite(boxes).all(axis=1)
+        clear = finite & (_occlusion(boxes, finite) <= p.max_overlap)  # largest fraction inside another box
+        if p.check_visible > 0 and self.camera is not None:
+            clear &= box_visibility(boxes, (self.camera.height, self.camera.width)) >= p.check_visible
+        return boxes, finite, clear
+
     def _box_centres(self, positions_m: np.ndarray) -> np.ndarray:
         b = self._boxes(positions_m)
         return 0.5 * (b[:, :2] + b[:, 2:])
@@ -713,12 +725,8 @@ class FusionTracker:
             return states
         t0 = time.perf_counter()
         pos = np.array([st.position_m for st in states])
-        boxes = self._boxes(pos)
-        ok = np.isfinite(boxes).all(axis=1)
-        occluded = _occlusion(boxes, ok)
-        if p.check_visible > 0 and self.camera is not None:
-            ok &= box_visibility(boxes, (self.camera.height, self.camera.width)) >= p.check_visible
-        todo = [q for q in todo if ok[row[q]] and occluded[row[q]] <= p.max_overlap]
+        boxes, _, clear = self._clear_boxes(pos)
+        todo = [q for q in todo if clear[row[q]]]
         img = self._image(t_ns) if todo else None
         given: dict[int, int] = {}
         if img is not None:
@@ -905,10 +913,8 @@ class FusionTracker:
         if t_img is None:
             return
         t0 = time.perf_counter()
-        boxes = self._boxes(pos)
-        ok = np.isfinite(boxes).all(axis=1)
+        boxes, ok, clear = self._clear_boxes(pos)
         vis = box_visibility(boxes, (self.camera.height, self.camera.width))
-        clear = ok & (_occlusion(boxes, ok) <= p.max_overlap) & (vis >= p.check_visible)
         learners = [k for k in rows if clear[k]]
         seen = ok & (vis >= self.bank.params.patches.min_visible)
         if not learners or np.count_nonzero(seen) < 2 or not (anyway or (since[learners] >= every).any()):
@@ -1017,13 +1023,8 @@ class FusionTracker:
         if not todo:
             return states
         t0 = time.perf_counter()
-        boxes = self._boxes(pos)
-        ok = np.isfinite(boxes).all(axis=1)
-        occluded = _occlusion(boxes, ok)  # (n,) largest fraction of each box inside another box
-        if p.check_visible > 0 and self.camera is not None:  # and mostly inside the image
-            ok &= box_visibility(boxes, (self.camera.height, self.camera.width)) >= p.check_visible
-        todo = [pair for pair in todo if ok[row[pair[0]]] and ok[row[pair[1]]]
-                and occluded[row[pair[0]]] <= p.max_overlap and occluded[row[pair[1]]] <= p.max_overlap]
+        boxes, _, clear = self._clear_boxes(pos)
+        todo = [pair for pair in todo if clear[row[pair[0]]] and clear[row[pair[1]]]]
         img = self._image(t_ns) if todo else None
         exchanged: list[tuple[int, int]] = []
         busy: set[int] = set()  # ids exchanged at this step
