@@ -50,6 +50,12 @@ def gate_distances(pred_centres: np.ndarray, det_centres: np.ndarray,
     """
     p = _centres(pred_centres, "pred_centres")
     d = _centres(det_centres, "det_centres")
+    if isinstance(sigma, float | int) and not isinstance(sigma, bool):
+        # one σ for all (the tracker's case): dividing by it is dividing by a (n_t, 2) array full of it
+        if sigma <= 0:  # as np.any(s <= 0) below (NaN passes)
+            raise ValueError("sigma: expected values > 0")
+        diff = (d[None, :, :] - p[:, None, :]) / float(sigma)
+        return np.einsum("tdk,tdk->td", diff, diff)
     s = np.asarray(sigma, dtype=np.float64)
     if s.ndim == 0:
         s = np.full((p.shape[0], 2), float(s))
@@ -116,8 +122,10 @@ def association_states(D: np.ndarray, G: float = 4.0) -> tuple[np.ndarray, np.nd
     if dist.ndim != 2:
         raise ValueError(f"D: expected shape (n_t, n_d), got {dist.shape}")
     found = dist < G
-    c = np.minimum(found.sum(axis=1), 2).astype(np.int64)
-    r = np.minimum(found.sum(axis=0), 2).astype(np.int64)
+    c = found.sum(axis=1, dtype=np.int64)
+    np.minimum(c, 2, out=c)
+    r = found.sum(axis=0, dtype=np.int64)
+    np.minimum(r, 2, out=r)
     return c, r, found
 
 

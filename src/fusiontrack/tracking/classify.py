@@ -18,7 +18,6 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from fusiontrack.laser.features import GEOMETRIC_FEATURES, segment_features, window_features
 from fusiontrack.types import Detection, ObjectClass, Situation, TrackState
@@ -85,12 +84,16 @@ class TrackClassifier:
         if live and detections:
             have = [d for d in detections if d.features.get("points_m") is not None and len(d.features["points_m"])]
             if have:
-                centres = np.stack([d.position_m for d in have])
-                pos = np.stack([s.position_m for s in live])
-                dist, j = cKDTree(centres).query(pos, distance_upper_bound=self.gate_m)
-                for s, dd, jj in zip(live, dist, j, strict=True):
+                centres = np.array([d.position_m for d in have])
+                pos = np.array([s.position_m for s in live])
+                # nearest detection of each track, brute force (a few tracks x a few detections: a k-d tree's
+                # construction costs more than the whole matrix)
+                d2 = ((pos[:, None, 0] - centres[None, :, 0]) ** 2 + (pos[:, None, 1] - centres[None, :, 1]) ** 2)
+                j = d2.argmin(axis=1)
+                near = d2[np.arange(len(live)), j] < self.gate_m * self.gate_m
+                for s, ok, jj in zip(live, near.tolist(), j.tolist(), strict=True):
                     # A merged or correlated target shares its segment with another: not its own shape.
-                    if np.isfinite(dd) and s.situation not in _SHARED:
+                    if ok and s.situation not in _SHARED:
                         rows = self._rows.setdefault(s.track_id, deque(maxlen=self.window))
                         rows.append((t_ns * 1e-9, have[jj].features["points_m"], centres[jj]))
         # Every track with a full window is predicted on the same frames (one vectorised call per `every`

@@ -130,20 +130,39 @@ def update(x: np.ndarray, P: np.ndarray, z: np.ndarray, H: np.ndarray = H_POSITI
     xs, Ps = _batch(x, P)
     zs = np.asarray(z, dtype=np.float64)
     missing = np.isnan(zs).any(axis=-1) if zs.ndim == 2 else np.zeros(xs.shape[0], bool)
-    if missing.any():
+    any_missing = missing.any()
+    if any_missing:
         zs = np.where(missing[:, None], 0.0, zs)
-    y, S = innovation(xs, Ps, zs, H, R)
+    # innovation(xs, Ps, zs, H, R), inlined: the same products, without checking and converting twice
     Hm = np.asarray(H, dtype=np.float64)
+    m = Hm.shape[-2]
+    if zs.shape != (xs.shape[0], m):
+        raise ValueError(f"z: expected shape ({xs.shape[0]}, {m}), got {zs.shape}")
     Rm = np.asarray(R, dtype=np.float64)
     if Rm.ndim == 0:
-        Rm = Rm * np.eye(Hm.shape[-2])
-    PHt = Ps @ np.swapaxes(Hm, -1, -2)  # (n, k, m)
-    K = np.swapaxes(np.linalg.solve(S, np.swapaxes(PHt, -1, -2)), -1, -2)  # P Hᵀ S⁻¹, S symmetric
+        Rm = Rm * _eye(m)
+    Ht = Hm.swapaxes(-1, -2)
+    y = zs - _apply(Hm, xs)
+    S = Hm @ Ps @ Ht + Rm
+    PHt = Ps @ Ht  # (n, k, m)
+    K = np.linalg.solve(S, PHt.swapaxes(-1, -2)).swapaxes(-1, -2)  # P Hᵀ S⁻¹, S symmetric
     x_new = xs + np.einsum("nij,nj->ni", K, y)
-    IKH = np.eye(xs.shape[1]) - K @ Hm
-    P_new = IKH @ Ps @ np.swapaxes(IKH, -1, -2) + K @ Rm @ np.swapaxes(K, -1, -2)
-    P_new = 0.5 * (P_new + np.swapaxes(P_new, -1, -2))
-    if missing.any():
+    IKH = _eye(xs.shape[1]) - K @ Hm
+    P_new = IKH @ Ps @ IKH.swapaxes(-1, -2) + K @ Rm @ K.swapaxes(-1, -2)
+    P_new = 0.5 * (P_new + P_new.swapaxes(-1, -2))
+    if any_missing:
         x_new[missing] = xs[missing]
         P_new[missing] = Ps[missing]
     return x_new, P_new
+
+
+_EYES: dict[int, np.ndarray] = {}
+
+
+def _eye(n: int) -> np.ndarray:
+    """``np.eye(n)``, read-only and cached."""
+    e = _EYES.get(n)
+    if e is None:
+        e = _EYES[n] = np.eye(n)
+        e.setflags(write=False)
+    return e

@@ -71,42 +71,66 @@ def laser_log_likelihood(state: np.ndarray, feet_obs: np.ndarray, inter_feet: np
         raise ValueError(f"state: expected shape (n_t, n_p, {STATE_DIM}), got {x.shape}")
     if f.shape != (n_t, 2, 2):
         raise ValueError(f"feet_obs: expected shape ({n_t}, 2, 2), got {f.shape}")
-    sd = np.broadcast_to(np.asarray(inter_feet, dtype=np.float64), (n_t,))
-    one = np.broadcast_to(np.asarray(one_foot, dtype=bool), (n_t,))
+    sd = _vector(inter_feet, np.float64, n_t)
+    one = _vector(one_foot, bool, n_t)
     missing = np.isnan(f).any(axis=(1, 2)) | (np.isnan(sd) & ~one)
-    if missing.any():
+    any_missing = missing.any()
+    if any_missing:
         f = np.where(missing[:, None, None], 0.0, f)
         sd = np.where(missing, 0.0, sd)
+    any_one = one.any()
 
     cols = np.ascontiguousarray(x.reshape(-1, STATE_DIM).T).reshape(STATE_DIM, n_t, x.shape[1])  # (8, n_t, n_p)
-    f1x, f1y, f2x, f2y = (f.reshape(n_t, 4).T.copy()[:, :, None])  # each (n_t, 1)
-    lx, ly, rx, ry = cols[0], cols[1], cols[2], cols[3]
-
-    dl1, dl2 = _sqdist(lx, ly, f1x, f1y), _sqdist(lx, ly, f2x, f2y)
-    dr1, dr2 = _sqdist(rx, ry, f1x, f1y), _sqdist(rx, ry, f2x, f2y)
-    l_to_1 = dl1 <= dl2
-    same = l_to_1 == (dr1 <= dr2)
-    straight, crossed = dl1 + dr2, dl2 + dr1
+    # The four squared foot-to-barycentre distances in one pass, each |p - f|² = dx² + dy² as written out:
+    # rows (l-f1, l-f2, r-f1, r-f2) x (x, y)
+    d = cols[_FOOT_ROWS]  # (8, n_t, n_p): lx ly lx ly rx ry rx ry
+    d -= f.reshape(n_t, 4).T[_OBS_ROWS][:, :, None]  # f1x f1y f2x f2y f1x f1y f2x f2y
+    d *= d
+    d4 = d[0::2] + d[1::2]  # (4, n_t, n_p): dl1, dl2, dr1, dr2
+    dl1, dl2, dr1, dr2 = d4
+    le = d4[0::2] <= d4[1::2]  # dl1 <= dl2, dr1 <= dr2
+    l_to_1 = le[0]
+    same = le[0] == le[1]
+    pair = d4[_STRAIGHT_A] + d4[_STRAIGHT_B]  # straight = dl1 + dr2, crossed = dl2 + dr1
+    straight, crossed = pair
     # feet on different barycentres: the nearest-foot assignment itself (the smaller of the two
     # pairings); both on the same one of a two-foot segment: the smaller total Euclidean distance
     pick_straight = straight <= crossed
     if same.any():
-        by_total = np.sqrt(dl1) + np.sqrt(dr2) <= np.sqrt(dl2) + np.sqrt(dr1)
-        pick_straight = np.where(same, by_total, pick_straight)
+        r4 = np.sqrt(d4)
+        tot = r4[_STRAIGHT_A] + r4[_STRAIGHT_B]  # sqrt(dl1) + sqrt(dr2), sqrt(dl2) + sqrt(dr1)
+        pick_straight = np.where(same, tot[0] <= tot[1], pick_straight)
     sq = np.where(pick_straight, straight, crossed)
-    if one.any():  # a one-foot segment: both feet go to the nearest (the same) barycentre
+    if any_one:  # a one-foot segment: both feet go to the nearest (the same) barycentre
         both = np.where(l_to_1, dl1 + dr1, dl2 + dr2)
         sq[one] = both[one]
-    inv_f = np.where(one, 1.0 / (2.0 * sigma_f_one**2), 1.0 / (2.0 * sigma_f**2))[:, None]
-    log_l = sq * -inv_f
+        sq *= -np.where(one, 1.0 / (2.0 * sigma_f_one**2), 1.0 / (2.0 * sigma_f**2))[:, None]
+    else:
+        sq *= -(1.0 / (2.0 * sigma_f**2))
+    log_l = sq
     d_pred = predicted_feet_distance(cols[PHI], cols[STRIDE], kappa, lateral_m)
-    log_walk = (sd[:, None] - d_pred) ** 2 * (-1.0 / (2.0 * sigma_w**2))
-    if one.any():
+    log_walk = np.subtract(sd[:, None], d_pred, out=d_pred)  # (S_d - D_pred)² (-1 / 2σ_w²)
+    log_walk *= log_walk
+    log_walk *= -1.0 / (2.0 * sigma_w**2)
+    if any_one:
         log_walk[one] = 0.0
     log_l += log_walk
-    if missing.any():
+    if any_missing:
         log_l[missing] = 0.0
     return log_l
+
+
+_FOOT_ROWS = np.array([0, 1, 0, 1, 2, 3, 2, 3])
+_OBS_ROWS = np.array([0, 1, 2, 3, 0, 1, 2, 3])
+_STRAIGHT_A = np.array([0, 1])
+_STRAIGHT_B = np.array([3, 2])
+
+
+def _vector(value: object, dtype: type, n: int) -> np.ndarray:
+    """``value`` as an ``(n,)`` array of ``dtype`` (broadcast from a scalar), without copying an array that is one."""
+    if isinstance(value, np.ndarray) and value.dtype == dtype and value.shape == (n,):
+        return value
+    return np.broadcast_to(np.asarray(value, dtype=dtype), (n,))
 
 
 def laser_likelihood(state: np.ndarray, feet_obs: np.ndarray, inter_feet: np.ndarray, one_foot: np.ndarray,

@@ -12,6 +12,7 @@ predicted particles, set uniform weights, flag ``lost``).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -45,11 +46,17 @@ def standard_normal(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndar
     angle is taken in float32, so values carry ~1e-7 relative rounding, irrelevant for noise.
     Deterministic for a given generator state.
     """
-    n = int(np.prod(shape))
+    n = math.prod(shape) if isinstance(shape, tuple) else int(np.prod(shape))  # math.prod: no array round trip
     h = (n + 1) // 2
     u = _check_rng(rng).random(2 * h)
-    radius = np.sqrt(-2.0 * np.log1p(-u[:h]))  # 1 - u in (0, 1]: finite
-    theta = (2.0 * np.pi * u[h:]).astype(np.float32)
+    # sqrt(-2 log(1 - u)), in place on a buffer (1 - u in (0, 1]: finite); the same operations as written out
+    radius = np.negative(u[:h])
+    np.log1p(radius, out=radius)
+    radius *= -2.0
+    np.sqrt(radius, out=radius)
+    ang = u[h:]
+    ang *= 2.0 * np.pi  # u's second half is not needed any more
+    theta = ang.astype(np.float32)
     out = np.empty(2 * h)
     np.multiply(radius, np.cos(theta), out=out[:h])
     np.multiply(radius, np.sin(theta), out=out[h:])
@@ -140,7 +147,20 @@ def reweight(weights: np.ndarray, log_likelihood: np.ndarray) -> tuple[np.ndarra
     weights, degenerate : see :func:`normalise_log_weights`.
     """
     with np.errstate(divide="ignore"):
-        return normalise_log_weights(np.log(_check_weights(weights)) + log_likelihood)
+        lw = np.log(_check_weights(weights))
+    if lw.shape == np.shape(log_likelihood):
+        lw += log_likelihood  # lw is ours: add in place (the same sums)
+    else:
+        lw = lw + log_likelihood
+    if lw.dtype != np.float64:
+        return normalise_log_weights(lw)
+    m = lw.max(axis=-1, keepdims=True)  # NaN propagates through max: a finite m means no NaN, no inf row
+    if not np.isfinite(m).all():
+        return normalise_log_weights(lw)  # the general path (NaN, all -inf, +inf)
+    lw -= m  # as normalise_log_weights, on our own buffer
+    np.exp(lw, out=lw)
+    lw /= lw.sum(axis=-1, keepdims=True)
+    return lw, np.zeros(lw.shape[:-1], bool)
 
 
 def systematic_resample(weights: np.ndarray, rng: np.random.Generator | None = None,
@@ -193,7 +213,10 @@ def systematic_resample(weights: np.ndarray, rng: np.random.Generator | None = N
     cum /= cum[:, -1:]
     # u_j < C_i for j < ceil((C_i - u0) N): particle i takes the offsets between its neighbours' counts.
     # 0 <= C_i <= 1 and 0 <= u0 < 1/N keep the count in [0, N] (ceil of (-1, 0] is -0 -> 0).
-    n_below = np.ceil((cum - u[:, None]) * n_out).astype(np.intp)
+    cum -= u[:, None]  # in place on cum (ours): ceil((cum - u) N)
+    cum *= n_out
+    np.ceil(cum, out=cum)
+    n_below = cum.astype(np.intp)
     n_below[:, -1] = n_out  # C_last = 1 > u_{N-1} exactly; guard against rounding
     counts = n_below.copy()
     counts[:, 1:] -= n_below[:, :-1]
@@ -232,8 +255,11 @@ def resample_where(particles: np.ndarray, weights: np.ndarray, mask: np.ndarray 
     w = _check_weights(weights)
     if x.ndim != 3 or w.shape != x.shape[:2]:
         raise ValueError(f"particles (n_t, n_p, d) and weights (n_t, n_p) disagree: {x.shape} vs {w.shape}")
-    sel = np.broadcast_to(np.asarray(mask, dtype=bool), (x.shape[0],))
     n_t, n_p, d = x.shape
+    if isinstance(mask, np.ndarray) and mask.dtype == bool and mask.shape == (n_t,):
+        sel = mask  # the usual case: no broadcast_to (slow on small arrays)
+    else:
+        sel = np.broadcast_to(np.asarray(mask, dtype=bool), (n_t,))
     if sel.all():
         flat = systematic_resample(w, rng, u0=u0, flat_out=True)
         return np.take(x.reshape(n_t * n_p, d), flat, axis=0).reshape(x.shape), np.full_like(w, 1.0 / n_p)

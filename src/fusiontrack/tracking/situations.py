@@ -117,7 +117,10 @@ class SituationFrame:
     @property
     def merge_groups(self) -> dict[int, np.ndarray]:
         """``{shared detection: member target indices (sorted)}`` for every merge this frame."""
-        dets = np.unique(self.merge_det[self.merge_det >= 0])
+        on = self.merge_det >= 0
+        if not on.any():  # the usual frame: no merge (np.unique is slow on tiny arrays)
+            return {}
+        dets = np.unique(self.merge_det[on])
         return {int(j): np.flatnonzero(self.merge_det == j) for j in dets}
 
     @property
@@ -128,7 +131,7 @@ class SituationFrame:
     @property
     def split_candidates(self) -> np.ndarray:
         """Indices of detections that may become new targets by splitting off an unmerged target."""
-        return np.flatnonzero(self.det_labels == DetectionLabel.SPLIT_CANDIDATE)
+        return np.flatnonzero(self.det_labels == _D_SPLIT_CANDIDATE)
 
     @property
     def appear_candidates(self) -> np.ndarray:
@@ -183,39 +186,52 @@ def classify_situations(c: np.ndarray, r: np.ndarray, found: np.ndarray, merged_
 
     dist = np.where(fnd, 0.0, np.inf) if D is None else np.where(fnd, np.asarray(D, dtype=np.float64), np.inf)
     if n_d:
-        nearest = np.argmin(dist, axis=1)
-        nearest = np.where(cc > 0, nearest, -1).astype(np.int64)
+        nearest = dist.argmin(axis=1).astype(np.int64, copy=False)
+        nearest[~(cc > 0)] = -1
     else:
         nearest = np.full(n_t, -1, dtype=np.int64)
 
+    # (plain int codes below: numpy converts IntEnum members slowly, and this runs every frame)
     # rule 1: a shared detection whose gating targets all found only it
-    merge_at = (rr == 2) & ~np.any(fnd & (cc != 1)[:, None], axis=0)  # (n_d,)
-    merging = np.any(fnd & merge_at[None, :], axis=1)  # such targets have c = 1: one detection each
-    merge_det = np.where(merging, nearest, -1).astype(np.int64)
+    merge_at = (rr == 2) & ~fnd[cc != 1].any(axis=0)  # (n_d,)
+    merging = fnd[:, merge_at].any(axis=1)  # such targets have c = 1: one detection each
+    merge_det = np.where(merging, nearest, -1)
     # rule 2: every gated detection found by this target alone
-    all_r1 = ~np.any(fnd & (rr != 1)[None, :], axis=1)
+    all_r1 = ~fnd[:, rr != 1].any(axis=1)
     two = cc == 2
     splitting = merged & two & all_r1
     apart = ~merged & two & all_r1  # unmerged, c = 2, r = 1 everywhere: not a split
     # rule 4: one detection, found by nobody else
     single = (cc == 1) & (rr[np.maximum(nearest, 0)] == 1) if n_d else np.zeros(n_t, bool)
 
-    labels = np.full(n_t, TargetLabel.CORRELATED, dtype=np.int8)  # rule 3 and its completion
-    labels[merged] = TargetLabel.MERGED
-    labels[single & ~merged] = TargetLabel.NONCORRELATED
-    labels[splitting] = TargetLabel.SPLITTING
-    labels[merging] = TargetLabel.MERGING
-    labels[(cc == 0) & ~edge_t] = TargetLabel.COASTING
-    labels[(cc == 0) & edge_t] = TargetLabel.DISAPPEARING
+    labels = np.full(n_t, _T_CORRELATED, dtype=np.int8)  # rule 3 and its completion
+    labels[merged] = _T_MERGED
+    labels[single & ~merged] = _T_NONCORRELATED
+    labels[splitting] = _T_SPLITTING
+    labels[merging] = _T_MERGING
+    none = cc == 0
+    labels[none & ~edge_t] = _T_COASTING
+    labels[none & edge_t] = _T_DISAPPEARING
 
-    det_labels = np.where(rr == 2, DetectionLabel.SHARED, DetectionLabel.MATCHED).astype(np.int8)
-    extra = np.any(fnd & apart[:, None], axis=0)
-    extra[nearest[apart]] = False
-    det_labels[extra] = DetectionLabel.SPLIT_CANDIDATE
-    det_labels[(rr == 0) & edge_d] = DetectionLabel.APPEAR_EDGE
-    det_labels[(rr == 0) & ~edge_d] = DetectionLabel.APPEAR_INTERIOR
+    det_labels = np.full(n_d, _D_MATCHED, dtype=np.int8)
+    det_labels[rr == 2] = _D_SHARED
+    if apart.any():
+        extra = fnd[apart].any(axis=0)
+        extra[nearest[apart]] = False
+        det_labels[extra] = _D_SPLIT_CANDIDATE
+    unfound = rr == 0
+    det_labels[unfound & edge_d] = _D_APPEAR_EDGE
+    det_labels[unfound & ~edge_d] = _D_APPEAR_INTERIOR
     return SituationFrame(_frozen(labels), _frozen(det_labels), _frozen(merge_det), _frozen(nearest),
                           _frozen(fnd.copy()))
+
+
+_T_NONCORRELATED, _T_CORRELATED, _T_MERGING, _T_MERGED, _T_SPLITTING, _T_COASTING, _T_DISAPPEARING = (
+    int(TargetLabel.NONCORRELATED), int(TargetLabel.CORRELATED), int(TargetLabel.MERGING), int(TargetLabel.MERGED),
+    int(TargetLabel.SPLITTING), int(TargetLabel.COASTING), int(TargetLabel.DISAPPEARING))
+_D_MATCHED, _D_SHARED, _D_APPEAR_EDGE, _D_APPEAR_INTERIOR, _D_SPLIT_CANDIDATE = (
+    int(DetectionLabel.MATCHED), int(DetectionLabel.SHARED), int(DetectionLabel.APPEAR_EDGE),
+    int(DetectionLabel.APPEAR_INTERIOR), int(DetectionLabel.SPLIT_CANDIDATE))
 
 
 def boundary_distance(points_m: np.ndarray, polygon_m: np.ndarray) -> np.ndarray:

@@ -385,11 +385,14 @@ def detection_arrays(detections: Sequence[Detection]) -> DetectionArrays:
     if missing.any():
         inter[missing] = np.hypot(*(feet[missing, 0] - feet[missing, 1]).T)
     one |= ~has_feet | ~np.isfinite(inter)
-    inter = np.where(one, 0.0, inter)
+    if one.any():
+        inter = np.where(one, 0.0, inter)
     points = []
     for f in feats:
         pts = f.get("points_m")
         points.append(pts if pts is not None and pts.ndim == 2 and pts.shape[1] == 2 else None)
+    if np.isfinite(centres).all() and np.isfinite(feet).all():  # the usual case: every row ok
+        return DetectionArrays(centres, feet, inter, one, tuple(points))
     ok = np.isfinite(centres).all(axis=1) & np.isfinite(feet).all(axis=(1, 2))
     if ok.all():
         return DetectionArrays(centres, feet, inter, one, tuple(points))
@@ -541,15 +544,19 @@ class _Merged:
         m = pred.shape[0]
         if points is not None and points.shape[0] >= 2 * m:
             c = pred.copy()
+            px, py = points[:, 0], points[:, 1]
             for _ in range(2):
-                d2 = ((points[:, None, :] - c[None, :, :]) ** 2).sum(axis=2)
-                lab = np.argmin(d2, axis=1)
+                lab = _pair_d2(points, c).argmin(axis=1)
                 cnt = np.bincount(lab, minlength=m)
-                sx = np.bincount(lab, points[:, 0], minlength=m)
-                sy = np.bincount(lab, points[:, 1], minlength=m)
+                sx = np.bincount(lab, px, minlength=m)
+                sy = np.bincount(lab, py, minlength=m)
                 has = cnt >= 2
-                c[has, 0] = sx[has] / cnt[has]
-                c[has, 1] = sy[has] / cnt[has]
+                if has.all():
+                    c[:, 0] = sx / cnt
+                    c[:, 1] = sy / cnt
+                else:
+                    c[has, 0] = sx[has] / cnt[has]
+                    c[has, 1] = sy[has] / cnt[has]
             res = c - pred
         else:
             res = np.broadcast_to(centre - pred.mean(axis=0), pred.shape)
@@ -576,8 +583,7 @@ def count_blobs(points: np.ndarray, radius_m: float) -> int:
     k = points.shape[0]
     if k <= 1:
         return k
-    d2 = ((points[:, None, :] - points[None, :, :]) ** 2).sum(axis=2)
-    reach = d2 < radius_m * radius_m
+    reach = _pair_d2(points, points) < radius_m * radius_m
     a = reach.astype(np.float32)
     for _ in range(k):  # transitive closure by squaring: log2(k) steps suffice
         nxt = (a @ a) > 0
@@ -585,14 +591,28 @@ def count_blobs(points: np.ndarray, radius_m: float) -> int:
             break
         reach = nxt
         a = reach.astype(np.float32)
-    return int(np.unique(np.argmax(reach, axis=1)).size)
+    first = reach.argmax(axis=1)  # the first point each one reaches
+    if reach.diagonal().all():  # every point reaches itself: first == own index at one point per group
+        return int(np.count_nonzero(first == np.arange(k)))
+    return int(np.unique(first).size)
+
+
+def _pair_d2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Squared distances ``(len(a), len(b))`` between 2-D points: ``dx² + dy²``, the values of
+    ``((a[:, None] - b[None]) ** 2).sum(axis=2)`` (a reduction over 2 is one addition) without numpy's slow
+    reduction over a length-2 inner axis."""
+    dx = a[:, 0, None] - b[None, :, 0]
+    dy = a[:, 1, None] - b[None, :, 1]
+    dx *= dx
+    dy *= dy
+    dx += dy
+    return dx
 
 
 def _max_pair_distance(points: np.ndarray) -> float:
     if points.shape[0] < 2:
         return 0.0
-    d = points[:, None, :] - points[None, :, :]
-    return float(np.sqrt((d**2).sum(axis=2).max()))
+    return float(np.sqrt(_pair_d2(points, points).max()))
 
 
 def _fast_state(t_ns: int, sensor: str, track_id: int, position: np.ndarray, velocity: np.ndarray, situation: str,
@@ -612,14 +632,29 @@ def _fast_state(t_ns: int, sensor: str, track_id: int, position: np.ndarray, vel
     if covariance is not None:
         covariance = np.array(covariance, dtype=np.float64)
         covariance.setflags(write=False)
-    for name, value in (("t_ns", t_ns), ("sensor", sensor), ("track_id", track_id), ("position_m", pos),
-                        ("velocity_mps", vel), ("covariance", covariance), ("cls", _PERSON), ("situation", situation),
-                        ("sensors", sensors), ("score", 1.0), ("box_px", None), ("camera", "")):
-        object.__setattr__(st, name, value)
+    # the slots' own setters (what object.__setattr__ ends up calling), without the per-name lookups
+    (set_t, set_sensor, set_id, set_pos, set_vel, set_cov, set_cls, set_situation, set_sensors, set_score, set_box,
+     set_camera) = _STATE_SETTERS
+    set_t(st, t_ns)
+    set_sensor(st, sensor)
+    set_id(st, track_id)
+    set_pos(st, pos)
+    set_vel(st, vel)
+    set_cov(st, covariance)
+    set_cls(st, _PERSON)
+    set_situation(st, situation)
+    set_sensors(st, sensors)
+    set_score(st, 1.0)
+    set_box(st, None)
+    set_camera(st, "")
     return st
 
 
 _PERSON = str(ObjectClass.PERSON)
+_STATE_SETTERS = tuple(TrackState.__dict__[name].__set__ for name in (
+    "t_ns", "sensor", "track_id", "position_m", "velocity_mps", "covariance", "cls", "situation", "sensors", "score",
+    "box_px", "camera"))
+assert len(_STATE_SETTERS) == len(TrackState.__slots__)  # every field is set
 
 
 # --------------------------------------------------------------------------------------------------
@@ -843,7 +878,8 @@ class LaserPeopleTracker:
         if rows.size and n_d:
             nearest = sf.nearest_det[rows]
             ok = nearest >= 0
-            if np.unique(nearest[ok]).size == np.count_nonzero(ok):
+            near_ok = nearest[ok].tolist()
+            if len(set(near_ok)) == len(near_ok):  # no detection wanted twice
                 assigned[rows] = nearest
             else:
                 cost = np.where(found[rows], D[rows], np.inf)
@@ -906,7 +942,8 @@ class LaserPeopleTracker:
                 js = assigned[row:row + 1][assigned[row:row + 1] >= 0]
             if js.size == 0:
                 continue
-            z = det.centres[js].mean(axis=0)
+            # one detection: its centre (the mean of one row is that row); else the mean, as np.mean sums / n
+            z = det.centres[js[0]].copy() if js.size == 1 else det.centres[js].mean(axis=0)
             pts = [det.points[j] for j in js] if det.points else []
             points = np.concatenate(pts) if pts and all(q is not None for q in pts) else None
             m.correct(points, z, dt, p.member_alpha, p.member_beta, p.member_min_gap_m)
@@ -969,16 +1006,19 @@ class LaserPeopleTracker:
         states: list[TrackState] = []
         sensor, sensors = p.sensor, self._sensors
         appear_ns = p.appear_window_s * 1e9
-        for row in np.flatnonzero(~gone_w):
-            lab = int(w_labels[row])
-            tid = int(self._id[row])
+        # (Python scalars from tolist(): the same values, without numpy scalar indexing per row)
+        w_lab_l, id_l, born_edge_l, born_l, upd_l = (w_labels.tolist(), self._id.tolist(), self._born_edge.tolist(),
+                                                     self._born.tolist(), upd.tolist())
+        pos_w, vel_w = self._pos, self._vel
+        for row in np.flatnonzero(~gone_w).tolist():
+            lab = w_lab_l[row]
+            tid = id_l[row]
             sit = _SITUATION_NAMES[lab]
-            if lab == _NONCORRELATED and self._born_edge[row] and t_ns - self._born[row] < appear_ns:
+            if lab == _NONCORRELATED and born_edge_l[row] and t_ns - born_l[row] < appear_ns:
                 sit = _APPEARING
             elif lab == _CORRELATED:
-                self._extend_correlated(tid, t_ns, self._pos[row])
-            states.append(_fast_state(t_ns, sensor, tid, self._pos[row], self._vel[row], sit,
-                                      sensors if upd[row] else ()))
+                self._extend_correlated(tid, t_ns, pos_w[row])
+            states.append(_fast_state(t_ns, sensor, tid, pos_w[row], vel_w[row], sit, sensors if upd_l[row] else ()))
         for i in np.flatnonzero(~gone_m):
             m = merged[i]
             sit = _DISAPPEARING_S if labels[n_w + i] == _DISAPPEARING else _MERGED_S
@@ -1183,7 +1223,7 @@ class LaserPeopleTracker:
         proj = (pts - c) @ vt[0]
         pos = c + np.linspace(proj.min(), proj.max(), 2 * n + 1)[1::2, None] * vt[0][None, :]
         for _ in range(3):
-            lab = np.argmin(((pts[:, None, :] - pos[None, :, :]) ** 2).sum(axis=2), axis=1)
+            lab = np.argmin(_pair_d2(pts, pos), axis=1)
             for q in range(n):
                 if np.count_nonzero(lab == q) >= 2:
                     pos[q] = pts[lab == q].mean(axis=0)

@@ -235,7 +235,8 @@ def predicted_feet_distance(phase_rad: np.ndarray, stride_m: np.ndarray, kappa: 
     distance : float64 array, m
         ``cos φ`` is evaluated in float32 (for speed): relative error < 3e-7, i.e. < 1 µm.
     """
-    along = kappa * np.asarray(stride_m, dtype=np.float64) * np.abs(_sincos(np.asarray(phase_rad, np.float64))[1])
+    cos = np.cos(np.asarray(phase_rad, np.float64).astype(np.float32)).astype(np.float64)  # _sincos's cos alone
+    along = kappa * np.asarray(stride_m, dtype=np.float64) * np.abs(cos)
     return along if lateral_m == 0.0 else np.hypot(along, lateral_m)
 
 
@@ -274,15 +275,18 @@ def predict_walking(state: np.ndarray, dt_s: float, rng: np.random.Generator,
     if not dt_s >= 0.0:
         raise ValueError(f"dt_s: expected a time step >= 0 s, got {dt_s}")
     nz = WalkingNoise() if noise is None else noise
-    k = nz.scale(dt_s)
-    sig = k * np.array([nz.foot_m, nz.foot_m, nz.foot_m, nz.foot_m, nz.heading_rad, nz.phase_rad,
-                        nz.period_s, nz.stride_m])
+    sig = _walking_sigmas(nz, nz.scale(dt_s))
     # work on contiguous columns, (8, n_t * n_p): numpy is slow on inner axes of length 2-8
     cols = np.ascontiguousarray(x.reshape(-1, STATE_DIM).T)
     if sig.any():
-        cols += standard_normal(_check_rng(rng), cols.shape) * sig[:, None]  # n_p, n_ψ, n_φ, n_T, n_S
-        np.clip(cols[PERIOD], *PERIOD_RANGE_S, out=cols[PERIOD])
-        np.clip(cols[STRIDE], *STRIDE_RANGE_M, out=cols[STRIDE])
+        noise_cols = standard_normal(_check_rng(rng), cols.shape)
+        noise_cols *= sig[:, None]
+        cols += noise_cols  # n_p, n_ψ, n_φ, n_T, n_S
+        # clip T and S (np.clip's values: max then min; the ufuncs directly, np.clip's wrapper is slow)
+        for row, (lo, hi) in ((PERIOD, PERIOD_RANGE_S), (STRIDE, STRIDE_RANGE_M)):
+            c = cols[row]
+            np.maximum(c, lo, out=c)
+            np.minimum(c, hi, out=c)
     phi, period = cols[PHI], cols[PERIOD]
     sin_a, cos_a = _sincos(cols[PSI:PHI + 1])
     ux, uy = cos_a[0], sin_a[0]
@@ -305,6 +309,22 @@ def predict_walking(state: np.ndarray, dt_s: float, rng: np.random.Generator,
     ang += TWO_PI * np.floor((np.pi - ang) * (1.0 / TWO_PI))  # wrap ψ, φ to (-π, π]
     out = np.ascontiguousarray(cols.T).reshape(x.shape)
     return out
+
+
+_SIGMAS: dict[tuple[WalkingNoise, float], np.ndarray] = {}
+
+
+def _walking_sigmas(nz: WalkingNoise, k: float) -> np.ndarray:
+    """``k`` times the per-column σ of the walking state (cached: the same few values every step)."""
+    sig = _SIGMAS.get((nz, k))
+    if sig is None:
+        sig = k * np.array([nz.foot_m, nz.foot_m, nz.foot_m, nz.foot_m, nz.heading_rad, nz.phase_rad,
+                            nz.period_s, nz.stride_m])
+        sig.setflags(write=False)
+        if len(_SIGMAS) > 256:
+            _SIGMAS.clear()
+        _SIGMAS[(nz, k)] = sig
+    return sig
 
 
 def predict_standing(state: np.ndarray, dt_s: float, rng: np.random.Generator,
