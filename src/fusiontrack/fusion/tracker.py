@@ -446,7 +446,8 @@ class _Claim:
 class Relabel:
     """Two ids exchanged in ``[from_ns, to_ns)`` (the tracker's own ids change from ``to_ns`` on): by an identity
     check (``a`` and ``b`` followed each other's person), or by a re-identification (new track ``a`` is lost track
-    ``b`` reborn; ``b`` has no state in the window, so the exchange names ``a``'s states ``b``)."""
+    ``b`` reborn: the exchange names ``a``'s states ``b``; ``b``'s only states in the window are the guesses the
+    laser tracker coasted after ``b``'s last detection, and they take ``a``'s id)."""
 
     from_ns: int
     to_ns: int
@@ -793,13 +794,16 @@ class FusionTracker:
         lq = self._laser_id.pop(q, q)
         self._alias[lq] = lost
         self._laser_id[lost] = lq
-        del self._lost[lost]
+        seen_ns = self._lost.pop(lost)[0]
         for other in self._claims.values():
             if lost in other.candidates:
                 other.candidates.remove(lost)
         self._born.pop(q, None)
         span_q, span_l = self._span.pop(q, [t_ns, t_ns]), self._span.get(lost)
-        from_ns = span_q[0] if span_l is None else max(span_q[0], span_l[1] + 1)
+        # back to the new track's birth, but not over the lost track's detected states: its states after its last
+        # detection (the laser tracker coasts a track for a while before calling it lost) are guesses, and where
+        # they overlap the new track's, the exchange gives them the new track's id (:class:`Relabel` swaps both)
+        from_ns = span_q[0] if span_l is None else max(span_q[0], min(span_l[1], seen_ns) + 1)
         self._span[lost] = [span_l[0] if span_l is not None else span_q[0], t_ns]
         if from_ns < t_ns:
             self.relabels.append(Relabel(int(from_ns), int(t_ns), int(q), int(lost)))
