@@ -3,13 +3,14 @@ constant-velocity Kalman + Hungarian baseline on the same laser detections.
 
 Tables, all measured in this process, one run after another (no parallel load on the timings):
 
-1. simulated ``crowd`` and ``groups``, 3 seeds each: MOTA (all frames, and after the first 3 s in which the
-   detector learns the background and nothing can be detected), IDF1, HOTA, ID switches, FP, FN, and the
-   median / p95 time per scan of the tracker step alone and of detector + tracker;
+1. simulated ``crowd`` and ``groups``, 3 seeds each: MOTA (all frames, and after the first 3 s: the tracker
+   reads the recording's first scans ahead to learn the backgrounds, ``background="prime"``, so people are
+   detected from the first scan, but everyone in view is a new track then), IDF1, HOTA, ID switches, FP, FN, and
+   the median / p95 time per scan of the tracker step alone and of detector + tracker;
 2. situation detection of the PF tracker against the simulator's truth events
    (:func:`fusiontrack.sim.situations.situation_events`, scored by :func:`fusiontrack.eval.situation_accuracy`
    with the identity map of the MOTA evaluation): per kind, true events, detected, false alarms; events
-   (true and detected) that start in the first 3 s, while the backgrounds are learnt, are left out. Against two
+   (true and detected) that start in the first 3 s, while every track is being born, are left out. Against two
    truths: the *centre-distance* truth (:func:`~fusiontrack.sim.situations.situation_events`: merged below
    0.6 m, correlated below 0.8 m between true body centres) and the *measurement* truth
    (:func:`~fusiontrack.sim.situations.segment_situation_events` on
@@ -142,8 +143,8 @@ def run_sim(name: str, seconds: float, seed: int, tmp: Path, settings: dict[str,
         skip = len(timings["track_s"]) // 10  # timings once the backgrounds are learnt and tracks exist
         total = [a + b for a, b in zip(timings["detect_s"], timings["track_s"], strict=True)]
         out[trk] = {"m": m, "warm": warm, "track_ms": _ms(timings["track_s"], skip), "total_ms": _ms(total, skip),
-                    # Events start counting after the warm-up too: nothing can be detected while the background
-                    # is learnt, and everyone in view at the start would be a missed "appear".
+                    # Events start counting after the warm-up too: every track is born in the first scans (not
+                    # on the edge: no "appear"), and the truth has no events for those who are there from the start.
                     "situations": situation_accuracy([e for e in truth_events if e.t_ns >= t_warm],
                                                      [e for e in events if e.t_ns >= t_warm], id_map=m.id_map)}
         if trk == "pf":  # the same persistence rules on both sides (sim/situations.py TRUTH_PERSISTENCE)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import time
 from pathlib import Path
 
 import numpy as np
@@ -183,6 +182,69 @@ def test_nothing_is_detected_while_learning_or_in_an_empty_room() -> None:
     assert false_alarms == 0
 
 
+def _walkers(rng: np.random.Generator, n_scans: int) -> tuple[list[LaserScan], np.ndarray]:
+    """Scans of both scanners (10 Hz) with 4 people walking at 1 m/s from the first scan on (none stands still
+    long enough to look like background), and their centres per scan ``(n_scans, 4, 2)``."""
+    start = np.array([[3.0, 3.0], [9.0, 3.0], [3.0, 7.0], [9.0, 7.0]])
+    velocity = np.array([[1.0, 0.0], [0.0, 1.0], [0.0, -1.0], [-1.0, 0.0]])
+    foot = np.array([0.12, 0.0])
+    scans, centres = [], []
+    for i in range(n_scans):
+        c = start + velocity * i * PERIOD_NS * 1e-9
+        legs = np.stack([c + foot, c - foot], axis=1).reshape(-1, 2)
+        centres.append(c)
+        scans.extend(_scan(name, i * PERIOD_NS, legs, rng) for name in POSES)
+    return scans, np.array(centres)
+
+
+def test_priming_detects_people_from_the_first_scan_and_then_matches_online_learning() -> None:
+    """A recording read ahead: the people walking from the first scan are found in it; from the first scan
+    after the priming on, the backgrounds and detections are those of online learning, number for number."""
+    rng = np.random.default_rng(RNG_SEED)
+    n_init = 15
+    scans, centres = _walkers(rng, 30)
+    online, primed = _detector(n_init=n_init), _detector(n_init=n_init)
+    used = primed.prime(iter(scans))
+    assert used == dict.fromkeys(POSES, n_init)
+    for i in range(30):
+        t = i * PERIOD_NS
+        for scan in scans[2 * i:2 * i + 2]:
+            online.update(scan)
+            primed.update(scan)
+        a, b = online.detect(t), primed.detect(t)
+        if i < n_init:
+            assert a == []  # online: still learning
+            # primed: all four from the first scan (a leg hidden: half the feet distance + a leg radius)
+            assert _match(b, centres[i]).max() < 0.12 + 2 * LEG_RADIUS_M
+        else:
+            for name in POSES:
+                np.testing.assert_array_equal(online.background(name).background_m,
+                                              primed.background(name).background_m)
+            assert len(a) == len(b)
+            for da, db in zip(a, b, strict=True):
+                np.testing.assert_array_equal(da.position_m, db.position_m)
+    assert primed.dropped_scans == dict.fromkeys(POSES, 0)
+
+
+def test_priming_a_scanner_with_too_few_scans_leaves_it_to_learn_online() -> None:
+    """A scanner that sent fewer than n_init scans before the limit is not half primed: it learns from its first
+    scan in the tracking pass exactly as online, while the other scanner is primed."""
+    rng = np.random.default_rng(RNG_SEED)
+    scans = [s for s in _walkers(rng, 30)[0] if s.sensor == "laser_a" or s.t_ns < 5 * PERIOD_NS]
+    primed, online = _detector(n_init=10), _detector(n_init=10)
+    used = primed.prime(iter(scans), max_scans=25)
+    assert used == {"laser_a": 20, "laser_b": 5}
+    assert primed.background("laser_b") is None
+    assert primed.background("laser_a").initialised
+    for scan in scans:
+        online.update(scan)
+        primed.update(scan)
+    np.testing.assert_array_equal(online.background("laser_b").background_m,
+                                  primed.background("laser_b").background_m)
+    np.testing.assert_array_equal(online.background("laser_a").background_m,
+                                  primed.background("laser_a").background_m)
+
+
 # ---- bad sensor data --------------------------------------------------------------------------------------
 
 
@@ -290,30 +352,19 @@ def test_unknown_sensor_and_bad_configuration_are_reported_by_name() -> None:
             _detector(**kwargs)
 
 
-# ---- speed ---------------------------------------------------------------------------------------------
-
-
-def test_per_frame_time_two_scanners_ten_people() -> None:
-    """2 scanners x 720 beams, 10 people: measured ≈ 0.06 ms per scan update (background + A8) and
-    ≈ 0.3 ms mean-shift + feet, ≈ 0.5 ms for ``detect`` with the Detection records; bounds are generous."""
+def test_ten_people_standing_are_found_in_every_frame() -> None:
+    """2 scanners x 720 beams, 10 people standing: every frame of 20 has exactly 10 detections (the speed of
+    this case is measured by benchmarks/laser_detection.py, not here)."""
     rng = np.random.default_rng(RNG_SEED)
     det = _detector()
     t = _learn_empty_room(det, rng)
-    _, legs = _people(rng, 10)
-    scans = [_scan(name, t + i * PERIOD_NS, legs.reshape(-1, 2), rng) for i in range(20) for name in POSES]
-    update_s, detect_s = [], []
+    centres, legs = _people(rng, 10)
     for i in range(20):
-        t0 = time.perf_counter()
-        det.update(scans[2 * i])
-        det.update(scans[2 * i + 1])
-        t1 = time.perf_counter()
-        dets = det.detect(scans[2 * i].t_ns)
-        t2 = time.perf_counter()
-        update_s.append(t1 - t0)
-        detect_s.append(t2 - t1)
+        for name in POSES:
+            det.update(_scan(name, t + i * PERIOD_NS, legs.reshape(-1, 2), rng))
+        dets = det.detect(t + i * PERIOD_NS)
         assert len(dets) == 10
-    assert np.median(update_s) < 2e-3
-    assert np.median(detect_s) < 5e-3
+        assert _match(dets, centres).max() < 0.1
 
 
 # ---- real data: the leg_tracker demo bag ------------------------------------------------------------------------

@@ -231,7 +231,7 @@ def situation_table(scores: Mapping[str, SituationScore], *, title: str | None =
 
 
 def segment_frames(path: str | Path, *, clock_corrections_ns: Mapping[str, int] | None = None,
-                   detector_params: Mapping[str, Any] | None = None) -> list[SegmentFrame]:
+                   detector_params: Mapping[str, Any] | None = None, background: str = "prime") -> list[SegmentFrame]:
     """The measurement-level situation truth of a simulated recording, one frame per tracker step.
 
     Replays :func:`fusiontrack.tracking.tracker.track_recording`'s detection loop (the same laser topics, clock
@@ -246,8 +246,9 @@ def segment_frames(path: str | Path, *, clock_corrections_ns: Mapping[str, int] 
     ----------
     path : str or Path
         Recording folder written by :func:`fusiontrack.sim.simulator.simulate`.
-    clock_corrections_ns, detector_params :
-        As for :func:`~fusiontrack.tracking.tracker.track_recording` (use the same values as the tracked run).
+    clock_corrections_ns, detector_params, background :
+        As for :func:`~fusiontrack.tracking.tracker.track_recording` (use the same values as the tracked run;
+        ``background`` ``"prime"`` or ``"learn"``).
 
     Returns
     -------
@@ -278,6 +279,10 @@ def segment_frames(path: str | Path, *, clock_corrections_ns: Mapping[str, int] 
             raise EvaluationError(f"{path}: no /ground_truth messages")
         gt_t = np.array([g.t_ns for g in gt], dtype=np.int64)
         detector, poses = detector_for_recording(rec, lasers, detector_params=detector_params)
+        if background == "prime":
+            detector.prime(synchronize(rec.messages(lasers), clock_corrections_ns=corrections))
+        elif background != "learn":
+            raise EvaluationError(f"background: expected 'prime' or 'learn', got {background!r}")
         names = detector.scanners
         pose = {name: planar_pose(poses[name]) for name in names}
         rows = {name: dict(zip(h["stamp_ns"].tolist(), range(h["stamp_ns"].size), strict=True))

@@ -23,14 +23,16 @@ Timing assumptions
   dropped (counted in :attr:`LaserPeopleDetector.dropped_scans`, as are scans whose beam angles are not
   finite); scanners are independent of each other.
 * The background needs ``n_init`` scans per scanner (5 s at 10 Hz by default) before anything is
-  foreground, and again after a change of beam count or beam angles (logged warning).
+  foreground, and again after a change of beam count or beam angles (logged warning). A recording can be
+  read ahead: :meth:`LaserPeopleDetector.prime` learns the backgrounds from its first scans before the
+  tracking pass, so that its first scans have foregrounds too.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
@@ -67,7 +69,7 @@ def planar_pose(laser2world: Any, name: str = "laser2world") -> tuple[np.ndarray
 class _Scanner:
     """Mutable per-scanner state (the detector's, not shared)."""
 
-    __slots__ = ("background", "geometry", "points_m", "rotation", "t_ns", "translation")
+    __slots__ = ("background", "geometry", "points_m", "primed_ns", "rotation", "t_ns", "translation")
 
     def __init__(self, rotation: np.ndarray, translation: np.ndarray) -> None:
         self.rotation = rotation
@@ -76,6 +78,7 @@ class _Scanner:
         self.geometry: tuple[int, float, float] | None = None
         self.t_ns: int | None = None
         self.points_m = np.zeros((0, 2))
+        self.primed_ns: int | None = None  # scans up to this time taught the background already (prime)
 
 
 class LaserPeopleDetector:
@@ -157,6 +160,54 @@ class LaserPeopleDetector:
         """The background model of one scanner (``None`` before its first scan)."""
         return self._state(sensor).background
 
+    def prime(self, scans: Iterable[LaserScan], max_scans: int | None = None) -> dict[str, int]:
+        """Learn every scanner's background from the start of a recording before tracking it.
+
+        Online, nothing is foreground until a scanner has sent ``n_init`` scans (2 s at 25 Hz): people present
+        from the start go undetected meanwhile. A recording can be read ahead: this takes ``scans`` (the same
+        time-ordered stream the tracking pass will read, from its start) until every scanner's background is
+        initialised, then forgets the scans' times and points but keeps the backgrounds. The tracking pass
+        then classifies the scans the priming read against the background learnt from them, *without
+        learning from them again*, and learns from every later scan as usual: from the first scan after the
+        priming on, each background is the one online learning would have reached (the same numbers), and
+        only the first scans' foregrounds differ (they exist).
+
+        Parameters
+        ----------
+        scans : iterable of LaserScan
+            The recording's scans from its start, in time order (as :meth:`update` takes them).
+        max_scans : int, optional
+            Stop after this many scans even if some scanner is not initialised (a silent scanner must not make
+            the priming read the whole recording). Default ``4 * n_init * number of scanners``.
+
+        Returns
+        -------
+        dict sensor -> int
+            Scans each scanner's priming took. A scanner whose background is not initialised at the end (too
+            few scans) is reset to nothing learnt, so that the tracking pass learns it online from its first
+            scan, as without priming.
+        """
+        n_init = int(self._bg_args["n_init"])
+        limit = 4 * n_init * len(self._scanners) if max_scans is None else int(max_scans)
+        used = dict.fromkeys(self._scanners, 0)
+        for i, scan in enumerate(scans):
+            if i >= limit:
+                break
+            self.update(scan)
+            if scan.sensor in used:
+                used[scan.sensor] += 1
+            if all(st.background is not None and st.background.initialised for st in self._scanners.values()):
+                break
+        for st in self._scanners.values():
+            if st.background is not None and st.background.initialised:
+                st.primed_ns = st.t_ns
+            else:
+                st.background, st.geometry, st.primed_ns = None, None, None
+            st.t_ns = None
+            st.points_m = np.zeros((0, 2))
+        self.dropped_scans = dict.fromkeys(self._scanners, 0)  # the tracking pass meets (and counts) them again
+        return used
+
     def _state(self, sensor: str) -> _Scanner:
         try:
             return self._scanners[sensor]
@@ -193,6 +244,10 @@ class LaserPeopleDetector:
             r_max = scan.range_max_m if scan.range_max_m > r_min else math.inf
             st.background = BeamBackground(max(scan.n_beams, 1), **self._bg_args, range_min_m=r_min,
                                            range_max_m=r_max)
+        elif st.primed_ns is not None and scan.t_ns <= st.primed_ns and geometry != st.geometry:
+            st.t_ns = scan.t_ns  # a scan from before a geometry change the priming went through: no points
+            st.points_m = np.zeros((0, 2))
+            return
         elif geometry != st.geometry:
             log.warning("laser %s: scan geometry changed from %s to %s (beams, angle_min, increment); "
                         "relearning its background", scan.sensor, st.geometry, geometry)
@@ -200,7 +255,11 @@ class LaserPeopleDetector:
         st.geometry = geometry
         st.t_ns = scan.t_ns
         r = scan.valid_ranges_m()
-        fg = st.background.update(r) if r.size else np.zeros(0, bool)
+        if st.primed_ns is not None and scan.t_ns <= st.primed_ns:  # already learnt from: classify only
+            fg = st.background.foreground(r) if r.size else np.zeros(0, bool)
+        else:
+            st.primed_ns = None
+            fg = st.background.update(r) if r.size else np.zeros(0, bool)
         if not fg.any():
             st.points_m = np.zeros((0, 2))
             return

@@ -1444,7 +1444,7 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
                     clock_corrections_ns: Mapping[str, int] | None = None,
                     detector_params: Mapping[str, Any] | None = None, rng: np.random.Generator | int | None = 0,
                     world_frame: str = "world", timings: dict[str, list[float]] | None = None,
-                    background: str = "learn", classify: bool = True) -> tuple[list[TrackState], list[Event]]:
+                    background: str = "prime", classify: bool = True) -> tuple[list[TrackState], list[Event]]:
     """Detect and track the people in a recording's laser scans.
 
     Builds a :class:`~fusiontrack.laser.LaserPeopleDetector` from the laser topics (each scanner posed by
@@ -1475,10 +1475,14 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
     world_frame : str
     timings : dict, optional
         Filled with per-step lists ``"detect_s"`` (detector update + detect) and ``"track_s"`` (tracker step).
-    background : ``"learn"`` or ``"none"``
-        ``"learn"``: the detector learns each scanner's background (fixed scanners). ``"none"``: a scanner on
-        a moving platform, whose background cannot be learnt: every return is foreground (the background is
-        set to "no return" and never learns, ``alpha = gamma = 0`` unless ``detector_params`` say otherwise).
+    background : ``"prime"``, ``"learn"`` or ``"none"``
+        ``"prime"`` (default): fixed scanners; each scanner's background is first learnt from the recording's
+        first ``n_init`` scans (read ahead, :meth:`~fusiontrack.laser.LaserPeopleDetector.prime`), so people
+        are detected from the first scan on, then learnt online as with ``"learn"``. ``"learn"``: as a live
+        sensor would be, learnt online only: nothing is detected during the first ``n_init`` scans of each
+        scanner. ``"none"``: a scanner on a moving platform, whose background cannot be learnt: every return is
+        foreground (the background is set to "no return" and never learns, ``alpha = gamma = 0`` unless
+        ``detector_params`` say otherwise).
     classify : bool
         Give each track its class (person / bicycle / car) with :class:`~fusiontrack.tracking.classify.
         TrackClassifier` (B18); its time is part of ``"track_s"``.
@@ -1502,8 +1506,14 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
         if not lasers:
             raise ConfigError(f"{path}: no sensor_msgs/LaserScan topic to track")
         total = sum(info[t].count for t in lasers if t in info)
+        if background not in ("prime", "learn", "none"):
+            raise ConfigError(f"background: expected 'prime', 'learn' or 'none', got {background!r}")
         detector, poses = detector_for_recording(rec, lasers, time_source=time_source, world_frame=world_frame,
-                                                 background=background, detector_params=detector_params)
+                                                 background="none" if background == "none" else "learn",
+                                                 detector_params=detector_params)
+        if background == "prime":
+            detector.prime(synchronize(rec.messages(lasers, time_source=time_source),
+                                       clock_corrections_ns=clock_corrections_ns))
         area = None if isinstance(area_m, str) else area_m
         if tracker == "pf":
             trk: Any = LaserPeopleTracker(params, area_m=area, rng=rng)
