@@ -124,3 +124,18 @@ def test_log_time_differs_from_header_time(tmp_path):
         (by_log,) = rec.messages(time_source="log")
     assert by_header.t_ns == scan.t_ns
     assert by_log.t_ns == scan.t_ns + 5_000_000
+
+
+def test_log_time_restamps_every_transform_of_a_tf_message(tmp_path):
+    """A TFMessage carries one header per transform: with ``time_source="log"`` each transform read from it takes
+    the message's log time, as every other record does (else a /tf pose and the scan it belongs to, logged
+    together, would be looked up at different times)."""
+    tf = next(r for r in sample_records(np.random.default_rng(4)) if isinstance(r, Transform) and not r.static)
+    with RecordingWriter(tmp_path / "r") as w:
+        w.write(tf, log_t_ns=tf.t_ns + 7_000_000)
+    with Recording(tmp_path / "r") as rec:
+        (by_header,) = rec.messages()
+        (by_log,) = rec.messages(time_source="log")
+    assert by_header.t_ns == tf.t_ns
+    assert by_log.t_ns == tf.t_ns + 7_000_000
+    assert records_equal(dataclasses.replace(by_log, t_ns=tf.t_ns), tf)

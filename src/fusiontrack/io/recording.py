@@ -388,8 +388,8 @@ class Recording:
                 skipped[conn.topic] += 1
                 reasons.setdefault(conn.topic, str(err) or type(err).__name__)
                 continue
-            if isinstance(out, list):
-                yield from out
+            if isinstance(out, list):  # a TFMessage: one record per transform, each stamped by its own header
+                yield from out if time_source == "header" else (with_time(r, log_ns) for r in out)
             else:
                 yield out
         if skipped:
