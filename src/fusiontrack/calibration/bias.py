@@ -29,7 +29,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -267,13 +267,17 @@ class _Laser:
     laser2world: np.ndarray
     background: BeamBackground | None = None
     scans: deque[tuple[LaserScan, np.ndarray]] = field(default_factory=lambda: deque(maxlen=8))
+    primed_ns: int | None = None  # scans up to this time taught the background already (prime)
+    primed_bg: np.ndarray | None = None  # the background the priming left (read-only copy)
 
 
 class HorizontalBiasEstimator:
     """Seed 000's adaptive horizontal bias between one camera and one or more lasers (ALGORITHMS.md A0–A10).
 
     Feed every scan to :meth:`observe_scan` (it learns the A7 background and keeps the last few scans) and
-    every camera frame's object boxes to :meth:`update`; use :attr:`corrected_camera` downstream.
+    every camera frame's object boxes to :meth:`update`; use :attr:`corrected_camera` downstream. Online, no
+    beam is foreground, so no update can happen, until each laser has sent ``bg_n_init`` scans (2 s at 25 Hz);
+    a recording can be read ahead first with :meth:`prime`.
 
     Parameters
     ----------
@@ -334,11 +338,83 @@ class HorizontalBiasEstimator:
 
     # -- input -------------------------------------------------------------------------------------
 
+    def background(self, sensor: str) -> BeamBackground | None:
+        """The A7 background model of one laser (``None`` before its first scan)."""
+        laser = self._lasers.get(sensor)
+        if laser is None:
+            raise ValueError(f"sensor: {sensor!r} is not one of the lasers {sorted(self._lasers)}")
+        return laser.background
+
+    def prime(self, scans: Iterable[LaserScan], max_scans: int | None = None) -> dict[str, int]:
+        """Learn every laser's background (A7) from the start of a recording before the bias pass reads it.
+
+        Online, no beam is foreground until a laser has sent ``bg_n_init`` scans (2 s at 25 Hz), so the bias
+        cannot move during the recording's first seconds. A recording can be read ahead: this takes ``scans``
+        (the laser scans of the stream the pass will read, from its start, on the same clock) until every
+        laser's background is initialised, then forgets the scans but keeps the backgrounds. The pass then
+        classifies the scans the priming read against the background learnt from them, *without learning from
+        them again*, and learns from every later scan as usual (as
+        :meth:`~fusiontrack.laser.LaserPeopleDetector.prime` does): from the first scan after the priming on,
+        each background is the one online learning would have reached (the same numbers); only the first scans
+        differ (they have foregrounds, so the first camera frames can update the bias).
+
+        Parameters
+        ----------
+        scans : iterable of LaserScan
+            The recording's scans from its start, in time order (as :meth:`observe_scan` takes them). Call
+            before the first :meth:`observe_scan`.
+        max_scans : int, optional
+            Stop after this many scans even if some laser is not initialised (a silent laser must not make the
+            priming read the whole recording). Default ``4 * bg_n_init * number of lasers``.
+
+        Returns
+        -------
+        dict sensor -> int
+            Scans each laser's priming took. A laser whose background is not initialised at the end (too few
+            scans) is reset to nothing learnt, so that the pass learns it online from its first scan, as
+            without priming.
+        """
+        if isinstance(max_scans, bool) or not (max_scans is None or (isinstance(max_scans, int | np.integer)
+                                                                      and max_scans >= 0)):
+            raise ValueError(f"max_scans: expected None or an integer >= 0, got {max_scans!r}")
+        if any(laser.background is not None for laser in self._lasers.values()):
+            raise ValueError("prime: the estimator has already seen scans; prime it before the first observe_scan")
+        limit = 4 * self.params.bg_n_init * len(self._lasers) if max_scans is None else int(max_scans)
+        used = dict.fromkeys(self._lasers, 0)
+        last: dict[str, int] = {}
+        for i, scan in enumerate(scans):
+            if i >= limit:
+                break
+            self.observe_scan(scan)
+            used[scan.sensor] += 1
+            last[scan.sensor] = int(scan.t_ns)
+            if all(las.background is not None and las.background.initialised for las in self._lasers.values()):
+                break
+        for name, laser in self._lasers.items():
+            laser.scans.clear()
+            if laser.background is not None and laser.background.initialised:
+                laser.primed_ns = last[name]
+                laser.primed_bg = laser.background.background_m.copy()
+                laser.primed_bg.setflags(write=False)
+            else:
+                laser.background, laser.primed_ns, laser.primed_bg = None, None, None
+        return used
+
     def observe_scan(self, scan: LaserScan) -> None:
-        """Learn the laser background (A7) from one scan and keep it for the next camera frames."""
+        """Learn the laser background (A7) from one scan and keep it for the next camera frames.
+
+        A scan :meth:`prime` has learnt from already (at or before the last scan it read from that laser) is
+        kept with the primed background and not learnt from again.
+        """
         laser = self._lasers.get(scan.sensor)
         if laser is None:
             raise ValueError(f"scan.sensor: {scan.sensor!r} is not one of the lasers {sorted(self._lasers)}")
+        if laser.primed_ns is not None:
+            if scan.t_ns <= laser.primed_ns:  # read by the priming: classify only
+                if laser.primed_bg is not None and laser.primed_bg.size == scan.ranges_m.size:
+                    laser.scans.append((scan, laser.primed_bg))  # (else from before a beam-count change: skipped)
+                return
+            laser.primed_ns, laser.primed_bg = None, None
         p = self.params
         if laser.background is None or laser.background.n_beams != scan.ranges_m.size:
             laser.background = BeamBackground(max(scan.ranges_m.size, 1), p.bg_alpha, p.bg_beta, p.tau_fg_m,

@@ -4,6 +4,11 @@ Camera frames go through foreground (A1–A3), blobs (A4) and the blob tracker (
 the A7 background; each frame's tracked objects update :class:`~fusiontrack.calibration.bias.
 HorizontalBiasEstimator`. Images are held back until every laser has a scan at least as late, so each frame
 is paired with the nearest scan on either side.
+
+The A7 backgrounds need ``bg_n_init`` scans (2 s at 25 Hz) before any beam is foreground, so learnt online no
+frame of a recording's first seconds can update the bias. By default (``background="prime"``) they are first
+learnt from the recording's first scans, read ahead (:meth:`~fusiontrack.calibration.bias.
+HorizontalBiasEstimator.prime`, :meth:`BiasInputs.prime`); ``"learn"`` learns online only, as live.
 """
 
 from __future__ import annotations
@@ -11,7 +16,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Generator, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -19,7 +24,7 @@ from typing import Any, Literal
 import cv2
 import numpy as np
 
-from fusiontrack.errors import RecordingError
+from fusiontrack.errors import ConfigError, RecordingError
 from fusiontrack.geometry import PinholeCamera, TransformTree, invert_transform
 from fusiontrack.io.recording import Recording
 from fusiontrack.io.sync import with_time
@@ -38,6 +43,7 @@ __all__ = [
     "FrameObjects",
     "bias_from_recording",
     "bias_settled",
+    "check_background",
     "object_centroids",
     "open_bias_inputs",
     "shrink_image",
@@ -48,6 +54,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 BoxSource = Literal["blobs", "truth"]
+Background = Literal["prime", "learn"]
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 """Camera image topics the bias reads (the reader decodes compressed images into :class:`~fusiontrack.types.Image`)."""
 PIXEL_EDGE_OFFSET_PX = 0.5
@@ -61,6 +68,19 @@ and centroid; at 320 x 240 the foreground, blobs and tracker cost about half as 
 residuals of simulated walkers grow a little (median |e| 0.05-0.09 -> 0.05-0.11 degree over six 30 s
 ``crowd`` runs). The fused pipeline's bias pass uses it (:func:`~fusiontrack.fusion.learn_camera_bias`);
 :func:`open_bias_inputs` and :func:`bias_from_recording` work at full resolution unless asked."""
+
+
+def check_background(background: object) -> Background:
+    """``background`` if it is ``"prime"`` or ``"learn"``.
+
+    Raises
+    ------
+    ConfigError
+        Anything else.
+    """
+    if background not in ("prime", "learn"):
+        raise ConfigError(f"background: expected 'prime' or 'learn', got {background!r}")
+    return background  # type: ignore[return-value]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -267,9 +287,40 @@ class BiasInputs:
     tracker: BlobTrackerParams | None
     vision_width_px: int | None = None
 
-    def estimator(self, params: BiasParams | None = None) -> HorizontalBiasEstimator:
-        """A fresh estimator for this camera and these lasers."""
-        return HorizontalBiasEstimator(self.camera, self.lasers, params)
+    def estimator(self, params: BiasParams | None = None, *, background: Background = "learn",
+                  max_prime_scans: int | None = None) -> HorizontalBiasEstimator:
+        """A fresh estimator for this camera and these lasers.
+
+        ``background="prime"`` learns its laser backgrounds first from the recording's first scans
+        (:meth:`prime`); ``"learn"`` (default here, so that an estimator fed alongside others by hand behaves as
+        a live one) leaves them to be learnt online from the stream.
+
+        Raises
+        ------
+        ConfigError
+            ``background`` is neither.
+        """
+        est = HorizontalBiasEstimator(self.camera, self.lasers, params)
+        if check_background(background) == "prime":
+            self.prime(est, max_prime_scans)
+        return est
+
+    def scans(self) -> Generator[LaserScan, None, None]:
+        """The recording's laser scans alone, in the order and on the clock iterating yields them."""
+        with Recording(self.path) as rec:
+            for msg in rec.messages(list(self.scan_topics.values())):
+                if isinstance(msg, LaserScan):
+                    t = msg.t_ns - self.offsets_ns.get(msg.sensor, 0)
+                    yield msg if t == msg.t_ns else with_time(msg, t)
+
+    def prime(self, est: HorizontalBiasEstimator, max_scans: int | None = None) -> dict[str, int]:
+        """Prime ``est``'s laser backgrounds from the recording's first scans
+        (:meth:`~fusiontrack.calibration.bias.HorizontalBiasEstimator.prime`); the scans read per laser."""
+        scans = self.scans()
+        try:
+            return est.prime(scans, max_scans)
+        finally:
+            scans.close()
 
     def __iter__(self) -> Iterator[LaserScan | FrameObjects]:
         truth_topic = f"/ground_truth/{self.camera_name}"
@@ -407,7 +458,7 @@ def bias_from_recording(path: str | Path, camera: str = "camera_0", lasers: Sequ
                         clock_offsets_ms: Mapping[str, float] | None = None, world_frame: str = "world",
                         cam2world: Any = None, laser2world: Mapping[str, Any] | None = None,
                         progress: Callable[[BiasStep], None] | None = None, image_topic: str | None = None,
-                        ) -> BiasRun:
+                        background: Background = "prime", max_prime_scans: int | None = None) -> BiasRun:
     """Estimate a camera's horizontal bias against the lasers of a recording (seed 000, ALGORITHMS.md A0–A10).
 
     Parameters
@@ -435,6 +486,13 @@ def bias_from_recording(path: str | Path, camera: str = "camera_0", lasers: Sequ
         Called with every step.
     image_topic : str, optional
         The camera's image topic (default: see :func:`open_bias_inputs`).
+    background : {"prime", "learn"}
+        ``"prime"`` (default): the laser backgrounds (A7) are first learnt from the recording's first scans, read
+        ahead (at most ``max_prime_scans``, default ``4 * bg_n_init`` per laser; a laser with fewer scans by
+        then learns online), so the bias can be updated from the first camera frames on
+        (:meth:`~fusiontrack.calibration.bias.HorizontalBiasEstimator.prime`). ``"learn"``: online only, as a
+        live sensor would: no update during each laser's first ``bg_n_init`` scans.
+    max_prime_scans : int, optional
 
     Returns
     -------
@@ -444,11 +502,14 @@ def bias_from_recording(path: str | Path, camera: str = "camera_0", lasers: Sequ
     ------
     RecordingError
         The recording lacks the camera, its calibration, the lasers or their poses.
+    ConfigError
+        ``background`` is neither ``"prime"`` nor ``"learn"``.
     """
+    check_background(background)
     inputs = open_bias_inputs(path, camera, lasers, boxes=boxes, clock_offsets_ms=clock_offsets_ms,
                               world_frame=world_frame, cam2world=cam2world, laser2world=laser2world,
                               image_topic=image_topic)
-    est = inputs.estimator(params)
+    est = inputs.estimator(params, background=background, max_prime_scans=max_prime_scans)
     steps = []
     for item in inputs:
         if isinstance(item, LaserScan):

@@ -1178,7 +1178,8 @@ def _image_topic(rec: Any, camera_topic: str | None) -> str | None:
 def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCamera | None = None,
                       lasers: Mapping[str, Any] | None = None, learning: BiasLearning | None = None,
                       clock_corrections_ns: Mapping[str, int] | None = None, world_frame: str = "world",
-                      image_topic: str | None = None, vision_width_px: int | None = 320) -> CameraBias:
+                      image_topic: str | None = None, vision_width_px: int | None = 320,
+                      background: str = "prime", max_prime_scans: int | None = None) -> CameraBias:
     """Learn a camera's horizontal bias against the lasers over the beginning of a recording (seed 000, A0–A10).
 
     Like :func:`~fusiontrack.calibration.bias_run.bias_from_recording`, but stops as soon as the bias has
@@ -1215,6 +1216,14 @@ def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCame
         The vision path (A1–A5) runs on the images shrunk by an integer factor to about this width (320:
         seed 000's 320 x 240, a quarter of the pixels of 640 x 480; :func:`~fusiontrack.calibration.bias_run.
         vision_factor`); None for full resolution.
+    background : ``"prime"`` or ``"learn"``
+        The lasers' A7 backgrounds: ``"prime"`` (default) learns them first from the recording's first scans,
+        read ahead (at most ``max_prime_scans``, default ``4 * bg_n_init`` per laser; a laser with fewer scans
+        by then learns online), so the bias can move from the first camera frames on
+        (:meth:`~fusiontrack.calibration.bias.HorizontalBiasEstimator.prime`); ``"learn"`` learns them online
+        only, as live: no update before each laser has sent ``bg_n_init`` scans (2 s at 25 Hz). The camera side
+        (A1's MOG2 foreground) learns online either way. The priming's time is part of ``seconds``.
+    max_prime_scans : int, optional
 
     Returns
     -------
@@ -1226,11 +1235,14 @@ def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCame
     ------
     RecordingError
         The recording lacks the camera's images or CameraInfo, the lasers or their poses.
+    ConfigError
+        ``background`` is neither ``"prime"`` nor ``"learn"``.
     """
-    from ..calibration.bias_run import bias_settled, open_bias_inputs
+    from ..calibration.bias_run import bias_settled, check_background, open_bias_inputs
     from ..types import LaserScan
     from ..vision.foreground import ForegroundParams
 
+    laser_background = check_background(background)
     lp = learning or BiasLearning()
     offsets_ms = {k: -v / 1e6 for k, v in (clock_corrections_ns or {}).items()}
     inputs = open_bias_inputs(path, camera_name, None if lasers is None else list(lasers),
@@ -1240,8 +1252,8 @@ def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCame
                               foreground=ForegroundParams(stopped=None))
     if camera is not None:
         inputs = dataclasses.replace(inputs, camera=camera)
-    est = inputs.estimator(lp.params)
     tic = time.perf_counter()
+    est = inputs.estimator(lp.params, background=laser_background, max_prime_scans=max_prime_scans)
     tol = np.radians(lp.tol_deg)
     learnt: list[float] = []
     targets: list[float] = []  # b + ē of every update: where it pulled the bias to
@@ -1304,7 +1316,7 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         As for ``track_recording``; ``clock_corrections_ns`` may also name the camera.
     background : ``"prime"`` or ``"learn"``
         As for ``track_recording``: the laser backgrounds learnt first from the recording's first scans (default),
-        or online only.
+        or online only; the bias pass's own laser backgrounds likewise (:func:`learn_camera_bias`).
     timings : dict, optional
         Filled with per-step ``"detect_s"`` and ``"track_s"`` (laser tracker + camera side + classification),
         and ``"bias_s"`` (one value: the bias learning).
@@ -1379,7 +1391,7 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         bias = None
         if camera is not None and learning is not None and first_path is not None:
             bias = _learn_bias(first_path, cam_sensor, image_topic, camera, poses, learning, corrections,
-                               world_frame)
+                               world_frame, background)
             if bias is not None:
                 camera = bias.corrected_camera
                 if timings is not None:
@@ -1408,12 +1420,12 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
 
 def _learn_bias(path: str | Path, cam_sensor: str, image_topic: str | None, camera: PinholeCamera,
                 poses: Mapping[str, np.ndarray], learning: BiasLearning, corrections: Mapping[str, int],
-                world_frame: str) -> CameraBias | None:
+                world_frame: str, background: str = "prime") -> CameraBias | None:
     """:func:`learn_camera_bias` for :func:`track_fused`: None (with a warning) when it cannot be learnt."""
     try:
         bias = learn_camera_bias(path, cam_sensor, camera=camera, lasers=poses, learning=learning,
                                  clock_corrections_ns=corrections, world_frame=world_frame,
-                                 image_topic=image_topic)
+                                 image_topic=image_topic, background=background)
     except (RecordingError, ValueError) as err:  # no usable calibration or images: fuse as calibrated
         log.warning("camera bias not learnt (%s): the camera is used as calibrated", err)
         return None
