@@ -470,13 +470,14 @@ def track(
     with progress() as bar:
         task = bar.add_task(f"tracking ({tracker_kind})", total=1.0)
         if pipeline == "people":  # seed 001's fused pipeline (fusiontrack.fusion)
-            from .fusion import track_fused
+            from .fusion import FusionParams, track_fused
 
             if tracker_kind != "pf":
                 raise ConfigError(f"--tracker: the people pipeline uses the pf tracker, got {tracker_kind!r}")
+            fusion_params = FusionParams.from_mapping(cfg.fusion, f"{config}: fusion") if cfg.fusion else None
             states, events, fstats = track_fused(
-                recordings, tracker_params=cfg.tracking or None, camera_topic=camera_topic, topics=topics,
-                time_source=time_source, clock_corrections_ns=cfg.clock_corrections_ns(),
+                recordings, params=fusion_params, tracker_params=cfg.tracking or None, camera_topic=camera_topic,
+                topics=topics, time_source=time_source, clock_corrections_ns=cfg.clock_corrections_ns(),
                 detector_params=cfg.laser or None, rng=seed, area_m=area_m, timings=timings,
                 adaptive_bias=camera_bias, progress=lambda f: bar.update(task, completed=f))
             if not fstats.camera:

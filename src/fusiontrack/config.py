@@ -101,6 +101,9 @@ class PipelineConfig(_Model):
     """Laser detector parameters (keyword arguments of ``LaserPeopleDetector``; checked by it)."""
     tracking: dict[str, Any] = Field(default_factory=dict)
     """Tracker parameters (fields of ``TrackerParams``; checked by it)."""
+    fusion: dict[str, Any] = Field(default_factory=dict)
+    """The fused people pipeline's options (fields of ``FusionParams``, ``appearance`` a nested table; checked by
+    ``FusionParams.from_mapping``)."""
     wearable: dict[str, Any] = Field(default_factory=dict)
     """The wearable pipeline's options (fields of ``WearableParams`` / ``AssocParams`` / ``VisualParams``;
     checked by ``run_wearable``)."""

@@ -252,6 +252,40 @@ class FusionParams:
         if not (isinstance(self.reid_min, int | float) and -1 <= self.reid_min <= 1):
             raise ConfigError(f"FusionParams.reid_min: expected a confidence in [-1, 1], got {self.reid_min!r}")
 
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any], source: str = "fusion") -> FusionParams:
+        """From a pipeline file's ``[fusion]`` table: field names as keys, ``appearance`` a nested table
+        (``patches``, ``features``, ``boost``, ... of :class:`~fusiontrack.vision.appearance.AppearanceParams`).
+
+        Raises
+        ------
+        ConfigError
+            An unknown key or a bad value, naming ``source`` and the key.
+        """
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(values) - names)
+        if unknown:
+            raise ConfigError(f"{source}: unknown parameter(s) {unknown}; expected some of {sorted(names)}")
+        vals = dict(values)
+        flags = [f.name for f in dataclasses.fields(cls) if isinstance(f.default, bool)]
+        bad = sorted(k for k in flags if k in vals and not isinstance(vals[k], bool))
+        if bad:
+            raise ConfigError(f"{source}: {bad[0]}: expected true or false, got {vals[bad[0]]!r}")
+        if "appearance" in vals:
+            app = vals["appearance"]
+            if not isinstance(app, Mapping):
+                raise ConfigError(f"{source}.appearance: expected a table, got {app!r}")
+            try:
+                vals["appearance"] = AppearanceParams.from_dict(app)
+            except (TypeError, ValueError) as err:
+                raise ConfigError(f"{source}.appearance: {err}") from err
+        try:
+            return cls(**vals)
+        except ConfigError as err:
+            raise ConfigError(f"{source}: {err}") from err
+        except (TypeError, ValueError) as err:  # a value of the wrong type met by a check that assumed numbers
+            raise ConfigError(f"{source}: {err}") from err
+
 
 @dataclass(frozen=True, slots=True)
 class BiasLearning:
