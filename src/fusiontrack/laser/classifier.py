@@ -76,9 +76,10 @@ class ObjectClassifier:
         if x.ndim != 2 or x.shape[1] != len(self.features):
             raise ValueError(f"X: expected shape (m, {len(self.features)}), got {x.shape}")
         vote = np.where(x[:, self.feature] <= self.threshold, self.left, self.right)  # (m, M) class index
-        out = np.zeros((len(x), len(self.classes)))
-        rows = np.broadcast_to(np.arange(len(x))[:, None], vote.shape)
-        np.add.at(out, (rows, vote), np.broadcast_to(self.alpha, vote.shape))
+        # Each class's weight summed over the stumps in their order (a running sum: the additions of
+        # ``np.add.at(out, (rows, vote), alpha)``, whose per-element loop is ~10x slower; adding 0 changes nothing)
+        hit = np.where(vote[:, :, None] == np.arange(len(self.classes)), self.alpha[:, None], 0.0)  # (m, M, C)
+        out = np.cumsum(hit, axis=1)[:, -1, :] if hit.shape[1] else np.zeros((len(x), len(self.classes)))
         return out / max(float(self.alpha.sum()), 1e-12)
 
     def predict(self, X: Any) -> np.ndarray:

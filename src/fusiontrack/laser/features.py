@@ -227,7 +227,9 @@ def window_features(geometric: Any, centres_m: Any, t_s: Any, valid: Any = None)
     c = np.asarray(centres_m, dtype=np.float64)
     if c.shape != (m, w, 2):
         raise ValueError(f"centres_m: expected shape {(m, w, 2)}, got {c.shape}")
-    t = np.broadcast_to(np.asarray(t_s, dtype=np.float64), (m, w))
+    t = np.asarray(t_s, dtype=np.float64)
+    if t.shape != (m, w):
+        t = np.broadcast_to(t, (m, w))
     ok = np.ones((m, w), bool) if valid is None else np.asarray(valid, dtype=bool).reshape(m, w)
     ok = ok & np.isfinite(c).all(axis=2) & np.isfinite(g).all(axis=2)
     n_ok = ok.sum(axis=1)
@@ -235,10 +237,13 @@ def window_features(geometric: Any, centres_m: Any, t_s: Any, valid: Any = None)
     mean_g = (np.where(okf, g, 0.0).sum(axis=1) / np.maximum(n_ok, 1)[:, None])[:, :_I_AXIS]
 
     # Consecutive valid frames: compact each row's valid frames to the front (stable), then difference.
-    order = np.argsort(~ok, axis=1, kind="stable")
-    cc = np.take_along_axis(c, order[..., None], axis=1)
-    tt = np.take_along_axis(t, order, axis=1)
-    ww = np.take_along_axis(g[..., _I_WIDTH], order, axis=1)
+    if np.count_nonzero(ok) == ok.size:  # the usual window, every frame valid: already in place
+        cc, tt, ww = c, t, g[..., _I_WIDTH]
+    else:
+        order = np.argsort(~ok, axis=1, kind="stable")
+        cc = np.take_along_axis(c, order[..., None], axis=1)
+        tt = np.take_along_axis(t, order, axis=1)
+        ww = np.take_along_axis(g[..., _I_WIDTH], order, axis=1)
     pair = np.arange(w - 1)[None, :] < (n_ok - 1)[:, None]  # (m, W-1) both ends valid
     step = np.diff(cc, axis=1)
     dt = np.diff(tt, axis=1)
@@ -281,12 +286,12 @@ def window_features(geometric: Any, centres_m: Any, t_s: Any, valid: Any = None)
     span = np.where(n_ok > 1, (np.where(valid_w, tt, -np.inf).max(axis=1) - tt[:, 0]), 0.0)
     frame_dt = span / np.maximum(n_ok - 1, 1)
     period = np.zeros(m)
-    for lag in range(2, w - 1):
-        # lag * frame_dt inside the band's periods [1/2, 1/0.6] s, and enough overlap to be meaningful
-        f = np.where(frame_dt > 0, 1.0 / np.maximum(lag * frame_dt, 1e-9), 0.0)
-        in_band = (f >= _GAIT_BAND_HZ[0]) & (f <= _GAIT_BAND_HZ[1]) & (n_ok - lag >= 3) & (var > 1e-12)
-        if not in_band.any():
-            continue
+    # lag * frame_dt inside the band's periods [1/2, 1/0.6] s, and enough overlap to be meaningful; every lag
+    # at once (lags, m), then only the lags where some row is in the band
+    lags = np.arange(2, max(w - 1, 2))
+    f = np.where(frame_dt > 0, 1.0 / np.maximum(lags[:, None] * frame_dt, 1e-9), 0.0)
+    in_bands = (f >= _GAIT_BAND_HZ[0]) & (f <= _GAIT_BAND_HZ[1]) & (n_ok - lags[:, None] >= 3) & (var > 1e-12)
+    for lag, in_band in zip(lags[in_bands.any(axis=1)].tolist(), in_bands[in_bands.any(axis=1)], strict=True):
         ac = (x[:, lag:] * x[:, :-lag]).sum(axis=1) / np.maximum(var, 1e-12) * (n_ok / np.maximum(n_ok - lag, 1))
         period = np.where(in_band, np.maximum(period, ac), period)
     out = np.column_stack([mean_g, mean_speed, speed_std, heading_rate, np.clip(period, -1.0, 1.0), width_std,

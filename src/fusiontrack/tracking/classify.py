@@ -60,7 +60,9 @@ class TrackClassifier:
             raise ValueError(f"gate_m: expected > 0 m, got {gate_m}")
         self.model = default_classifier() if model is None else model
         self.window, self.every, self.vote, self.gate_m = int(window), int(every), int(vote), float(gate_m)
-        self._rows: dict[int, deque[tuple[float, np.ndarray, np.ndarray]]] = {}  # (t_s, points, centre)
+        # [t_s, points, centre, shape row or None]: a segment's shape is computed once, when it is first used
+        # (each row is in window / every predictions; a segment's features do not depend on the others')
+        self._rows: dict[int, deque[list[Any]]] = {}
         self._frame = -1
         self._votes: dict[int, deque[str]] = {}
         self._cls: dict[int, str] = {}
@@ -88,14 +90,21 @@ class TrackClassifier:
                 pos = np.array([s.position_m for s in live])
                 # nearest detection of each track, brute force (a few tracks x a few detections: a k-d tree's
                 # construction costs more than the whole matrix)
-                d2 = ((pos[:, None, 0] - centres[None, :, 0]) ** 2 + (pos[:, None, 1] - centres[None, :, 1]) ** 2)
+                d2 = pos[:, None, 0] - centres[None, :, 0]  # dx² + dy², in place (x ** 2 is x * x)
+                d2 *= d2
+                dy = pos[:, None, 1] - centres[None, :, 1]
+                dy *= dy
+                d2 += dy
                 j = d2.argmin(axis=1)
-                near = d2[np.arange(len(live)), j] < self.gate_m * self.gate_m
+                near = d2.min(axis=1) < self.gate_m * self.gate_m  # the value at j
+                t_s = t_ns * 1e-9
                 for s, ok, jj in zip(live, near.tolist(), j.tolist(), strict=True):
                     # A merged or correlated target shares its segment with another: not its own shape.
                     if ok and s.situation not in _SHARED:
-                        rows = self._rows.setdefault(s.track_id, deque(maxlen=self.window))
-                        rows.append((t_ns * 1e-9, have[jj].features["points_m"], centres[jj]))
+                        rows = self._rows.get(s.track_id)
+                        if rows is None:
+                            rows = self._rows[s.track_id] = deque(maxlen=self.window)
+                        rows.append([t_s, have[jj].features["points_m"], centres[jj], None])
         # Every track with a full window is predicted on the same frames (one vectorised call per `every`
         # frames, not a few tracks on every frame).
         self._frame += 1
@@ -105,9 +114,13 @@ class TrackClassifier:
             # One call for every frame of every window: the shape of a segment is computed when it is used,
             # once per `every` frames, not each frame.
             segs = [row for tid in full for row in self._rows[tid]]
-            points = np.concatenate([r[1] for r in segs])
-            labels = np.repeat(np.arange(len(segs)), [len(r[1]) for r in segs])
-            g = segment_features(points, labels, len(segs)).reshape(len(full), self.window, len(GEOMETRIC_FEATURES))
+            todo = [r for r in segs if r[3] is None]
+            if todo:
+                points = np.concatenate([r[1] for r in todo])
+                labels = np.repeat(np.arange(len(todo)), [len(r[1]) for r in todo])
+                for r, feats in zip(todo, segment_features(points, labels, len(todo)), strict=True):
+                    r[3] = feats
+            g = np.array([r[3] for r in segs]).reshape(len(full), self.window, len(GEOMETRIC_FEATURES))
             c = np.array([r[2] for r in segs]).reshape(len(full), self.window, 2)
             t = np.array([r[0] for r in segs]).reshape(len(full), self.window)
             pred = self.model.predict(window_features(g, c, t - t[:, :1]))

@@ -74,11 +74,11 @@ def laser_log_likelihood(state: np.ndarray, feet_obs: np.ndarray, inter_feet: np
     sd = _vector(inter_feet, np.float64, n_t)
     one = _vector(one_foot, bool, n_t)
     missing = np.isnan(f).any(axis=(1, 2)) | (np.isnan(sd) & ~one)
-    any_missing = missing.any()
+    any_missing = np.count_nonzero(missing) > 0
     if any_missing:
         f = np.where(missing[:, None, None], 0.0, f)
         sd = np.where(missing, 0.0, sd)
-    any_one = one.any()
+    any_one = np.count_nonzero(one) > 0
 
     cols = np.ascontiguousarray(x.reshape(-1, STATE_DIM).T).reshape(STATE_DIM, n_t, x.shape[1])  # (8, n_t, n_p)
     # The four squared foot-to-barycentre distances in one pass, each |p - f|² = dx² + dy² as written out:
@@ -91,15 +91,15 @@ def laser_log_likelihood(state: np.ndarray, feet_obs: np.ndarray, inter_feet: np
     le = d4[0::2] <= d4[1::2]  # dl1 <= dl2, dr1 <= dr2
     l_to_1 = le[0]
     same = le[0] == le[1]
-    pair = d4[_STRAIGHT_A] + d4[_STRAIGHT_B]  # straight = dl1 + dr2, crossed = dl2 + dr1
-    straight, crossed = pair
+    straight = dl1 + dr2
+    crossed = dl2 + dr1
     # feet on different barycentres: the nearest-foot assignment itself (the smaller of the two
     # pairings); both on the same one of a two-foot segment: the smaller total Euclidean distance
     pick_straight = straight <= crossed
-    if same.any():
+    if np.count_nonzero(same):
         r4 = np.sqrt(d4)
-        tot = r4[_STRAIGHT_A] + r4[_STRAIGHT_B]  # sqrt(dl1) + sqrt(dr2), sqrt(dl2) + sqrt(dr1)
-        pick_straight = np.where(same, tot[0] <= tot[1], pick_straight)
+        # sqrt(dl1) + sqrt(dr2) <= sqrt(dl2) + sqrt(dr1)
+        pick_straight = np.where(same, r4[0] + r4[3] <= r4[1] + r4[2], pick_straight)
     sq = np.where(pick_straight, straight, crossed)
     if any_one:  # a one-foot segment: both feet go to the nearest (the same) barycentre
         both = np.where(l_to_1, dl1 + dr1, dl2 + dr2)
@@ -122,8 +122,6 @@ def laser_log_likelihood(state: np.ndarray, feet_obs: np.ndarray, inter_feet: np
 
 _FOOT_ROWS = np.array([0, 1, 0, 1, 2, 3, 2, 3])
 _OBS_ROWS = np.array([0, 1, 2, 3, 0, 1, 2, 3])
-_STRAIGHT_A = np.array([0, 1])
-_STRAIGHT_B = np.array([3, 2])
 
 
 def _vector(value: object, dtype: type, n: int) -> np.ndarray:

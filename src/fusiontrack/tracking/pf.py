@@ -31,6 +31,12 @@ __all__ = [
 ]
 
 
+def _all(a: np.ndarray) -> bool:
+    """``a.all()`` of an array (``count_nonzero`` is a plain C call; ``ndarray.all`` goes through Python wrappers:
+    a few µs per call on the hot path)."""
+    return np.count_nonzero(a) == a.size
+
+
 def _check_rng(rng: np.random.Generator) -> np.random.Generator:
     if not isinstance(rng, np.random.Generator):
         raise TypeError(f"rng: expected a numpy.random.Generator (hot path: no per-call seeding), "
@@ -117,12 +123,12 @@ def normalise_log_weights(log_w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     lw = np.asarray(log_w, dtype=np.float64)
     if lw.ndim < 1 or lw.shape[-1] == 0:
         raise ValueError(f"log_w: expected shape (..., n_p) with n_p >= 1, got {lw.shape}")
-    if np.isnan(lw).any():
+    if np.count_nonzero(np.isnan(lw)):
         lw = np.where(np.isnan(lw), -np.inf, lw)
     m = lw.max(axis=-1, keepdims=True)
     degenerate = m[..., 0] == -np.inf
     pos_inf = m[..., 0] == np.inf
-    if degenerate.any() or pos_inf.any():
+    if np.count_nonzero(degenerate) or np.count_nonzero(pos_inf):
         m = np.where(np.isfinite(m), m, 0.0)
         lw = np.where(pos_inf[..., None], np.where(lw == np.inf, 0.0, -np.inf), lw)
         lw = np.where(degenerate[..., None], 0.0, lw)
@@ -155,7 +161,7 @@ def reweight(weights: np.ndarray, log_likelihood: np.ndarray) -> tuple[np.ndarra
     if lw.dtype != np.float64:
         return normalise_log_weights(lw)
     m = lw.max(axis=-1, keepdims=True)  # NaN propagates through max: a finite m means no NaN, no inf row
-    if not np.isfinite(m).all():
+    if not _all(np.isfinite(m)):
         return normalise_log_weights(lw)  # the general path (NaN, all -inf, +inf)
     lw -= m  # as normalise_log_weights, on our own buffer
     np.exp(lw, out=lw)
@@ -208,7 +214,7 @@ def systematic_resample(weights: np.ndarray, rng: np.random.Generator | None = N
         if np.any(u < 0) or np.any(u >= 1.0 / n_out):
             raise ValueError(f"u0: expected values in [0, 1/N) = [0, {1.0 / n_out}), got {u}")
     cum = np.cumsum(w, axis=1)
-    if not (cum[:, -1] > 0).all():  # an all-zero row: uniform
+    if not _all(cum[:, -1] > 0):  # an all-zero row: uniform
         cum = np.where(cum[:, -1:] > 0, cum, np.arange(1.0, n_p + 1.0))
     cum /= cum[:, -1:]
     # u_j < C_i for j < ceil((C_i - u0) N): particle i takes the offsets between its neighbours' counts.
@@ -260,12 +266,12 @@ def resample_where(particles: np.ndarray, weights: np.ndarray, mask: np.ndarray 
         sel = mask  # the usual case: no broadcast_to (slow on small arrays)
     else:
         sel = np.broadcast_to(np.asarray(mask, dtype=bool), (n_t,))
-    if sel.all():
+    if _all(sel):
         flat = systematic_resample(w, rng, u0=u0, flat_out=True)
         return np.take(x.reshape(n_t * n_p, d), flat, axis=0).reshape(x.shape), np.full_like(w, 1.0 / n_p)
     x_out, w_out = x.copy(), w.copy()
-    if sel.any():
-        rows = np.flatnonzero(sel)
+    if np.count_nonzero(sel):
+        rows = sel.nonzero()[0]
         flat = systematic_resample(w[rows], rng, u0=u0, flat_out=True)
         flat += np.repeat((rows - np.arange(rows.size)) * n_p, n_p)  # sub-array rows -> full rows
         x_out[rows] = np.take(x.reshape(n_t * n_p, d), flat, axis=0).reshape(rows.size, n_p, d)

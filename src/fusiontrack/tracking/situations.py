@@ -131,7 +131,7 @@ class SituationFrame:
     @property
     def split_candidates(self) -> np.ndarray:
         """Indices of detections that may become new targets by splitting off an unmerged target."""
-        return np.flatnonzero(self.det_labels == _D_SPLIT_CANDIDATE)
+        return (self.det_labels == _D_SPLIT_CANDIDATE).nonzero()[0]
 
     @property
     def appear_candidates(self) -> np.ndarray:
@@ -184,44 +184,64 @@ def classify_situations(c: np.ndarray, r: np.ndarray, found: np.ndarray, merged_
         if arr.shape != (n,):
             raise ValueError(f"{name}: expected shape ({n},) to match found {fnd.shape}, got {arr.shape}")
 
-    dist = np.where(fnd, 0.0, np.inf) if D is None else np.where(fnd, np.asarray(D, dtype=np.float64), np.inf)
+    # The matrix work in numpy, the per-target and per-detection rules in plain Python over lists (a frame holds
+    # a few targets and detections: cheaper than ~50 numpy calls on tiny arrays; the same integers).
     if n_d:
-        nearest = dist.argmin(axis=1).astype(np.int64, copy=False)
-        nearest[~(cc > 0)] = -1
+        dist = np.where(fnd, 0.0, np.inf) if D is None else np.where(fnd, np.asarray(D, dtype=np.float64), np.inf)
+        nearest_l = dist.argmin(axis=1).tolist()
     else:
-        nearest = np.full(n_t, -1, dtype=np.int64)
-
-    # (plain int codes below: numpy converts IntEnum members slowly, and this runs every frame)
+        nearest_l = [-1] * n_t
+    c_l, r_l = cc.tolist(), rr.tolist()
+    for i in range(n_t):
+        if not c_l[i] > 0:
+            nearest_l[i] = -1
     # rule 1: a shared detection whose gating targets all found only it
     merge_at = (rr == 2) & ~fnd[cc != 1].any(axis=0)  # (n_d,)
-    merging = fnd[:, merge_at].any(axis=1)  # such targets have c = 1: one detection each
-    merge_det = np.where(merging, nearest, -1)
+    # (such targets have c = 1: one detection each)
+    merging = fnd[:, merge_at].any(axis=1).tolist() if np.count_nonzero(merge_at) else [False] * n_t
     # rule 2: every gated detection found by this target alone
-    all_r1 = ~fnd[:, rr != 1].any(axis=1)
-    two = cc == 2
-    splitting = merged & two & all_r1
-    apart = ~merged & two & all_r1  # unmerged, c = 2, r = 1 everywhere: not a split
-    # rule 4: one detection, found by nobody else
-    single = (cc == 1) & (rr[np.maximum(nearest, 0)] == 1) if n_d else np.zeros(n_t, bool)
+    all_r1 = (~fnd[:, rr != 1].any(axis=1)).tolist()
+    merged_l, edge_t_l = merged.tolist(), edge_t.tolist()
+    labels_l = [0] * n_t
+    merge_det_l = [-1] * n_t
+    apart_rows = []
+    for i in range(n_t):
+        ci = c_l[i]
+        if ci == 0:  # rule 5 (the last assignment of the rules' order wins)
+            lab = _T_DISAPPEARING if edge_t_l[i] else _T_COASTING
+        elif merging[i]:
+            lab = _T_MERGING
+        elif merged_l[i]:
+            lab = _T_SPLITTING if ci == 2 and all_r1[i] else _T_MERGED
+        elif ci == 1 and n_d and r_l[nearest_l[i]] == 1:  # rule 4: one detection, found by nobody else
+            lab = _T_NONCORRELATED
+        else:  # rule 3 and its completion
+            lab = _T_CORRELATED
+        if ci == 2 and all_r1[i] and not merged_l[i]:  # unmerged, c = 2, r = 1 everywhere: not a split
+            apart_rows.append(i)
+        labels_l[i] = lab
+        if merging[i]:
+            merge_det_l[i] = nearest_l[i]
+    labels = np.array(labels_l, dtype=np.int8)
+    nearest = np.array(nearest_l, dtype=np.int64)
+    merge_det = np.array(merge_det_l, dtype=np.int64)
 
-    labels = np.full(n_t, _T_CORRELATED, dtype=np.int8)  # rule 3 and its completion
-    labels[merged] = _T_MERGED
-    labels[single & ~merged] = _T_NONCORRELATED
-    labels[splitting] = _T_SPLITTING
-    labels[merging] = _T_MERGING
-    none = cc == 0
-    labels[none & ~edge_t] = _T_COASTING
-    labels[none & edge_t] = _T_DISAPPEARING
-
-    det_labels = np.full(n_d, _D_MATCHED, dtype=np.int8)
-    det_labels[rr == 2] = _D_SHARED
-    if apart.any():
-        extra = fnd[apart].any(axis=0)
-        extra[nearest[apart]] = False
-        det_labels[extra] = _D_SPLIT_CANDIDATE
-    unfound = rr == 0
-    det_labels[unfound & edge_d] = _D_APPEAR_EDGE
-    det_labels[unfound & ~edge_d] = _D_APPEAR_INTERIOR
+    edge_d_l = edge_d.tolist()
+    det_l = [_D_MATCHED] * n_d
+    for j in range(n_d):
+        rj = r_l[j]
+        if rj == 0:
+            det_l[j] = _D_APPEAR_EDGE if edge_d_l[j] else _D_APPEAR_INTERIOR
+        elif rj == 2:
+            det_l[j] = _D_SHARED
+    if apart_rows:
+        extra = fnd[apart_rows].any(axis=0).tolist()
+        for i in apart_rows:
+            extra[nearest_l[i]] = False
+        for j in range(n_d):
+            if extra[j] and r_l[j] != 0:
+                det_l[j] = _D_SPLIT_CANDIDATE
+    det_labels = np.array(det_l, dtype=np.int8)
     return SituationFrame(_frozen(labels), _frozen(det_labels), _frozen(merge_det), _frozen(nearest),
                           _frozen(fnd.copy()))
 

@@ -126,6 +126,12 @@ _MERGING, _MERGED, _SPLITTING = int(TargetLabel.MERGING), int(TargetLabel.MERGED
 _COASTING, _DISAPPEARING = int(TargetLabel.COASTING), int(TargetLabel.DISAPPEARING)
 
 
+def _all(a: np.ndarray) -> bool:
+    """``a.all()`` of an array (``count_nonzero`` is a plain C call; ``ndarray.all`` goes through Python wrappers:
+    a few µs per call on the hot path)."""
+    return np.count_nonzero(a) == a.size
+
+
 # --------------------------------------------------------------------------------------------------
 # Parameters
 # --------------------------------------------------------------------------------------------------
@@ -365,33 +371,44 @@ def detection_arrays(detections: Sequence[Detection]) -> DetectionArrays:
     ``inter_feet_m`` defaults to the distance of the two feet and ``one_foot`` to ``False``; a detection
     without ``feet_m`` is one foot at its centre; a non-finite ``inter_feet_m`` makes it one foot.
     """
-    dets = [d for d in detections if d.position_m is not None]
-    k = len(dets)
+    centres_l: list[Any] = []
+    feet_list: list[Any] = []
+    inter_l: list[Any] = []
+    one_l: list[Any] = []
+    points: list[np.ndarray | None] = []
+    all_feet = True
+    for d in detections:  # one pass over the detections (hot path)
+        if d.position_m is None:
+            continue
+        f = d.features
+        centres_l.append(d.position_m)
+        fm = f.get("feet_m")
+        if all_feet and (fm is None or fm.shape != (2, 2)):
+            all_feet = False
+        feet_list.append(fm)
+        inter_l.append(f.get("inter_feet_m", np.nan))
+        one_l.append(f.get("one_foot", False))
+        pts = f.get("points_m")
+        points.append(pts if pts is not None and pts.ndim == 2 and pts.shape[1] == 2 else None)
+    k = len(centres_l)
     if k == 0:
         return _NO_DETECTIONS
-    centres = np.array([d.position_m for d in dets])
-    feats = [d.features for d in dets]
-    feet_list = [f.get("feet_m") for f in feats]
-    if all(f is not None and f.shape == (2, 2) for f in feet_list):
+    centres = np.array(centres_l)
+    if all_feet:
         feet = np.array(feet_list, dtype=np.float64)
-        has_feet = np.ones(k, bool)
     else:
         has_feet = np.array([f is not None and f.shape == (2, 2) for f in feet_list])
         feet = np.array([f if ok else np.stack([c, c]) for f, ok, c in zip(feet_list, has_feet, centres, strict=True)],
                         dtype=np.float64)
-    inter = np.array([f.get("inter_feet_m", np.nan) for f in feats], dtype=np.float64)
-    one = np.array([f.get("one_foot", False) for f in feats], dtype=bool)
-    missing = np.isnan(inter) & has_feet
-    if missing.any():
+    inter = np.array(inter_l, dtype=np.float64)
+    one = np.array(one_l, dtype=bool)
+    missing = np.isnan(inter) if all_feet else np.isnan(inter) & has_feet
+    if np.count_nonzero(missing):
         inter[missing] = np.hypot(*(feet[missing, 0] - feet[missing, 1]).T)
-    one |= ~has_feet | ~np.isfinite(inter)
-    if one.any():
+    one |= ~np.isfinite(inter) if all_feet else ~has_feet | ~np.isfinite(inter)
+    if np.count_nonzero(one):
         inter = np.where(one, 0.0, inter)
-    points = []
-    for f in feats:
-        pts = f.get("points_m")
-        points.append(pts if pts is not None and pts.ndim == 2 and pts.shape[1] == 2 else None)
-    if np.isfinite(centres).all() and np.isfinite(feet).all():  # the usual case: every row ok
+    if _all(np.isfinite(centres)) and _all(np.isfinite(feet)):  # the usual case: every row ok
         return DetectionArrays(centres, feet, inter, one, tuple(points))
     ok = np.isfinite(centres).all(axis=1) & np.isfinite(feet).all(axis=(1, 2))
     if ok.all():
@@ -459,9 +476,9 @@ class CandidateSet:
                 self.n_many[r] += nb[c] >= 5
                 taken[c] = True
         keep = (t_ns - self.last_t) <= self.gap_ns
-        if not keep.all():
+        if not _all(keep):
             self._select(keep)
-        new = np.flatnonzero(~taken)
+        new = (~taken).nonzero()[0]
         if new.size:
             m = new.size
             self.first_t = np.concatenate([self.first_t, np.full(m, t_ns, np.int64)])
@@ -481,7 +498,7 @@ class CandidateSet:
     def ready(self, t_ns: int, need_edge_ns: int, need_interior_ns: int) -> np.ndarray:
         """Indices of candidates seen this step, for long enough (edge or interior rule), in >= 2 steps."""
         need = np.where(self.edge, need_edge_ns, need_interior_ns)
-        return np.flatnonzero((self.det >= 0) & (self.hits >= 2) & (t_ns - self.first_t >= need))
+        return ((self.det >= 0) & (self.hits >= 2) & (t_ns - self.first_t >= need)).nonzero()[0]
 
     def pop(self, idx: np.ndarray) -> None:
         keep = np.ones(len(self), bool)
@@ -525,6 +542,9 @@ class _Merged:
     split_since: int = 0  # start of the current run of split conditions (0: none)
     split_last: int = 0  # last time the split condition held
     multi_last: int = 0  # last time its segments showed more than one person (>= 3 leg blobs, or 2 segments)
+    # One-segment frames since multi_last whose leg blobs are not counted yet: (time, points), oldest first.
+    # They are counted only when multi_last is old enough for the single-person rule (see _settle_multi).
+    unchecked: list[tuple[int, np.ndarray]] = field(default_factory=list)
 
     @property
     def ids(self) -> list[int]:
@@ -551,7 +571,7 @@ class _Merged:
                 sx = np.bincount(lab, px, minlength=m)
                 sy = np.bincount(lab, py, minlength=m)
                 has = cnt >= 2
-                if has.all():
+                if _all(has):
                     c[:, 0] = sx / cnt
                     c[:, 1] = sy / cnt
                 else:
@@ -578,6 +598,25 @@ class _Merged:
             self.vel = self.vel + (beta / dt) * res
 
 
+def _settle_multi(m: _Merged, t_ns: int, radius_m: float) -> bool:
+    """Count the leg blobs of ``m``'s unchecked frames, newest first, up to the first with 3 or more: its time
+    becomes ``m.multi_last``. Returns whether that is the frame ``t_ns``.
+
+    The same ``multi_last`` as counting every frame when it comes (``multi_last`` is the last frame with >= 3
+    blobs), but counted only when the single-person rule needs it: while ``multi_last`` is recent, a newer
+    frame with more blobs would not change the decision (a merged target of two people walking together shows
+    >= 3 blobs most of the time, and counting once per ``single_s`` replaces counting every scan).
+    """
+    found = False
+    for t, points in reversed(m.unchecked):
+        if count_blobs(points, radius_m) >= 3:
+            m.multi_last = t
+            found = t == t_ns
+            break
+    m.unchecked.clear()
+    return found
+
+
 def count_blobs(points: np.ndarray, radius_m: float) -> int:
     """Number of groups of ``points (k, 2)`` linked by distances below ``radius_m`` (leg blobs of a segment)."""
     k = points.shape[0]
@@ -587,12 +626,12 @@ def count_blobs(points: np.ndarray, radius_m: float) -> int:
     a = reach.astype(np.float32)
     for _ in range(k):  # transitive closure by squaring: log2(k) steps suffice
         nxt = (a @ a) > 0
-        if (nxt == reach).all():
+        if _all(nxt == reach):
             break
         reach = nxt
         a = reach.astype(np.float32)
     first = reach.argmax(axis=1)  # the first point each one reaches
-    if reach.diagonal().all():  # every point reaches itself: first == own index at one point per group
+    if _all(reach.diagonal()):  # every point reaches itself: first == own index at one point per group
         return int(np.count_nonzero(first == np.arange(k)))
     return int(np.unique(first).size)
 
@@ -616,19 +655,23 @@ def _max_pair_distance(points: np.ndarray) -> float:
 
 
 def _fast_state(t_ns: int, sensor: str, track_id: int, position: np.ndarray, velocity: np.ndarray, situation: str,
-                sensors: tuple[str, ...], covariance: np.ndarray | None = None) -> TrackState:
+                sensors: tuple[str, ...], covariance: np.ndarray | None = None, *, frozen: bool = False) -> TrackState:
     """A :class:`TrackState` built without re-validating values the tracker already guarantees (hot path).
 
     Equivalent to ``TrackState(t_ns, sensor, track_id, position, velocity, situation=situation,
     sensors=sensors)`` for an int time and id, finite (2,) float arrays, a valid situation string and a
     tuple of str (and a finite (4, 4) ``covariance`` or None): the arrays are copied and made read-only
-    exactly as the constructor does.
+    exactly as the constructor does. ``frozen``: ``position`` and ``velocity`` are already such read-only
+    float64 copies (rows of a :func:`_frozen_copy`, which nobody writes), taken as they are.
     """
     st = object.__new__(TrackState)
-    pos = np.array(position, dtype=np.float64)
-    vel = np.array(velocity, dtype=np.float64)
-    pos.setflags(write=False)
-    vel.setflags(write=False)
+    if frozen:
+        pos, vel = position, velocity
+    else:
+        pos = np.array(position, dtype=np.float64)
+        vel = np.array(velocity, dtype=np.float64)
+        pos.setflags(write=False)
+        vel.setflags(write=False)
     if covariance is not None:
         covariance = np.array(covariance, dtype=np.float64)
         covariance.setflags(write=False)
@@ -650,11 +693,47 @@ def _fast_state(t_ns: int, sensor: str, track_id: int, position: np.ndarray, vel
     return st
 
 
+def _frozen_copy(a: np.ndarray) -> np.ndarray:
+    """A read-only float64 copy of ``a``; its rows (read-only views) are the states' arrays of one step: one copy
+    per array instead of one per state."""
+    out = np.array(a, dtype=np.float64)
+    out.setflags(write=False)
+    return out
+
+
 _PERSON = str(ObjectClass.PERSON)
 _STATE_SETTERS = tuple(TrackState.__dict__[name].__set__ for name in (
     "t_ns", "sensor", "track_id", "position_m", "velocity_mps", "covariance", "cls", "situation", "sensors", "score",
     "box_px", "camera"))
 assert len(_STATE_SETTERS) == len(TrackState.__slots__)  # every field is set
+
+
+_CV_MATRICES: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
+_H = kalman.H_POSITION
+_HT = _H.swapaxes(-1, -2)
+_EYE2, _EYE4 = np.eye(2), np.eye(4)
+_R_EYES: dict[float, np.ndarray] = {}
+
+
+def _merged_kalman_update(x: np.ndarray, P: np.ndarray, z: np.ndarray, r2: float) -> tuple[np.ndarray, np.ndarray]:
+    """``kalman.update(x[None], P[None], z[None], R=r2)`` of one merged target, returned as ``(x (4,), P (4, 4))``:
+    the same numpy operations on the same arrays, without the checks and conversions (hot path; ``z`` is a
+    finite detection centre)."""
+    Rm = _R_EYES.get(r2)
+    if Rm is None:
+        if len(_R_EYES) > 16:
+            _R_EYES.clear()
+        Rm = _R_EYES[r2] = np.asarray(r2, dtype=np.float64) * _EYE2
+    xs, Ps = x[None], P[None]
+    y = z[None] - xs @ _H.T
+    S = _H @ Ps @ _HT + Rm
+    PHt = Ps @ _HT
+    K = np.linalg.solve(S, PHt.swapaxes(-1, -2)).swapaxes(-1, -2)
+    x_new = xs + np.einsum("nij,nj->ni", K, y)
+    IKH = _EYE4 - K @ _H
+    P_new = IKH @ Ps @ IKH.swapaxes(-1, -2) + K @ Rm @ K.swapaxes(-1, -2)
+    P_new = 0.5 * (P_new + P_new.swapaxes(-1, -2))
+    return x_new[0], P_new[0]
 
 
 # --------------------------------------------------------------------------------------------------
@@ -838,23 +917,35 @@ class LaserPeopleTracker:
         if self._id.size:
             self._x = predict_people(self._x, self._standing, dt, self.rng, p.walking_noise, p.standing_noise)
         if self._merged:
-            F, Q = kalman.cv_matrices(dt, p.merged_q)
+            fq = _CV_MATRICES.get((dt, p.merged_q))
+            if fq is None:  # the same few step lengths over and over: cache them
+                if len(_CV_MATRICES) > 256:
+                    _CV_MATRICES.clear()
+                fq = _CV_MATRICES[(dt, p.merged_q)] = kalman.cv_matrices(dt, p.merged_q)
+            F, Q = fq
             for m in self._merged:
                 m.x = F @ m.x
                 m.P = F @ m.P @ F.T + Q
                 m.predict(dt, p.member_tau_s)
 
-    def _walking_centres(self) -> np.ndarray:
-        x = self._x
-        mid = x[..., 0:2] + x[..., 2:4]
+    def _walking_centres(self, mid: np.ndarray | None = None) -> np.ndarray:
+        """Particle mean of the feet midpoint of every walking target; ``mid`` (``x[..., 0:2] + x[..., 2:4]``,
+        the feet sums of the current particles) when the caller already has it."""
+        if mid is None:
+            mid = self._feet_sums()
         return 0.5 * np.einsum("tp,tpk->tk", self._w, mid)
+
+    def _feet_sums(self) -> np.ndarray:
+        x = self._x
+        return x[..., 0:2] + x[..., 2:4]
 
     def _update(self, t_ns: int, dt: float, det: DetectionArrays) -> list[TrackState]:
         p = self.params
         merged = self._merged
         n_w, n_m, n_d = self._id.size, len(merged), len(det)
         n_t = n_w + n_m
-        cw = self._walking_centres()
+        mid = self._feet_sums()  # the particles do not move until the resampling (but for a re-acquisition)
+        cw = self._walking_centres(mid)
         if n_m:
             centres = np.concatenate([cw, np.array([m.x[0:2] for m in merged])])
             D = np.concatenate([gate_distances(cw, det.centres, p.bandwidth_m)]
@@ -874,7 +965,7 @@ class LaserPeopleTracker:
         # ---- one detection per target (B10 nearest neighbour, one-to-one by Hungarian when contested)
         want = (labels == _NONCORRELATED) | (labels == _CORRELATED) | (labels == _MERGED)
         assigned = np.full(n_t, -1, np.int64)
-        rows = np.flatnonzero(want)
+        rows = want.nonzero()[0]
         if rows.size and n_d:
             nearest = sf.nearest_det[rows]
             ok = nearest >= 0
@@ -891,14 +982,14 @@ class LaserPeopleTracker:
             claimed[assigned[assigned >= 0]] = True
 
         # ---- walking targets that found nothing may re-acquire an unclaimed detection nearby
-        lost = np.flatnonzero(c[:n_w] == 0)
-        if lost.size and n_d and not claimed.all():
-            self._reacquire(lost, cw, det, claimed, assigned, t_ns)
+        lost = (c[:n_w] == 0).nonzero()[0]
+        if lost.size and n_d and not _all(claimed) and self._reacquire(lost, cw, det, claimed, assigned, t_ns):
+            mid = self._feet_sums()  # some targets restarted: new particles
 
         # ---- walking targets: B9 likelihood with the assigned detection, resample (X1, B10)
         aw = assigned[:n_w]
         upd = aw >= 0
-        if upd.any():
+        if np.count_nonzero(upd):
             feet = np.full((n_w, 2, 2), np.nan)
             sd = np.zeros(n_w)
             one = np.zeros(n_w, bool)
@@ -907,7 +998,7 @@ class LaserPeopleTracker:
             ll = laser_log_likelihood(self._x, feet, sd, one, p.sigma_f_m, p.sigma_w_m, sigma_f_one=p.sigma_f_one_m,
                                       kappa=p.kappa, lateral_m=p.lateral_m)
             if self._extra_ll is not None:  # fusion hook (B16): the camera's score map for correlated targets
-                corr = np.flatnonzero(upd & (labels[:n_w] == _CORRELATED))
+                corr = (upd & (labels[:n_w] == _CORRELATED)).nonzero()[0]
                 if corr.size:
                     xc = self._x[corr]
                     extra = self._extra_ll(t_ns, self._id[corr].copy(), 0.5 * (xc[..., 0:2] + xc[..., 2:4]))
@@ -915,7 +1006,7 @@ class LaserPeopleTracker:
                         ll[corr] = ll[corr] + np.asarray(extra, np.float64)
             self._w, _ = reweight(self._w, ll)
             self._seen[upd] = t_ns
-            pos = self._walking_centres()
+            pos = self._walking_centres(mid)
             self._x, self._w = resample_where(self._x, self._w, upd, self.rng)
         else:
             pos = cw
@@ -930,7 +1021,7 @@ class LaserPeopleTracker:
             if m.split_since and t_ns - m.split_last > self._cand.gap_ns:
                 m.split_since = 0  # the split condition has been gone for a while: start again
             if labels[row] == _SPLITTING:
-                js = np.flatnonzero(found[row])
+                js = found[row].nonzero()[0]
                 if m.split_since == 0:
                     m.split_since = t_ns
                 m.split_last = t_ns
@@ -944,18 +1035,25 @@ class LaserPeopleTracker:
                 continue
             # one detection: its centre (the mean of one row is that row); else the mean, as np.mean sums / n
             z = det.centres[js[0]].copy() if js.size == 1 else det.centres[js].mean(axis=0)
-            pts = [det.points[j] for j in js] if det.points else []
-            points = np.concatenate(pts) if pts and all(q is not None for q in pts) else None
+            pts = [det.points[j] for j in js.tolist()] if det.points else []
+            if pts and all(q is not None for q in pts):  # (one segment: its own points, read only)
+                points = pts[0] if len(pts) == 1 else np.concatenate(pts)
+            else:
+                points = None
             m.correct(points, z, dt, p.member_alpha, p.member_beta, p.member_min_gap_m)
-            xs, Ps = kalman.update(m.x[None], m.P[None], z[None], R=p.merged_r_m**2)
-            m.x, m.P = xs[0], Ps[0]
+            m.x, m.P = _merged_kalman_update(m.x, m.P, z, p.merged_r_m**2)
             m.seen = t_ns
             sensed_m[i] = True
             if points is not None and i not in split_now:  # one person's legs only, for a while: dissolve
-                if js.size >= 2 or count_blobs(points, p.blob_radius_m) >= 3:
+                if js.size >= 2:
                     m.multi_last = t_ns
-                elif t_ns - m.multi_last >= p.single_s * 1e9:
-                    dissolve.append((i, int(js[0])))
+                    m.unchecked.clear()
+                else:
+                    m.unchecked.append((t_ns, points))
+                    # single_s since the last frame with more than one person (leg blobs counted lazily): dissolve
+                    if t_ns - m.multi_last >= p.single_s * 1e9 and not _settle_multi(m, t_ns, p.blob_radius_m) \
+                            and t_ns - m.multi_last >= p.single_s * 1e9:
+                        dissolve.append((i, int(js[0])))
 
         # ---- deaths: coasting too long, or missing on the edge
         w_labels = labels[:n_w]
@@ -984,7 +1082,7 @@ class LaserPeopleTracker:
         # ---- splits (B7 rule 2, B17): identity recovery by motion
         for i in split_now:
             if not gone_m[i]:
-                self._split(merged[i], np.flatnonzero(found[n_w + i]), det, t_ns, new_merged, new_walkers)
+                self._split(merged[i], found[n_w + i].nonzero()[0], det, t_ns, new_merged, new_walkers)
                 gone_m[i] = True
 
         # ---- merged targets that hold one person only: the member nearest to it goes on, the others end
@@ -1010,7 +1108,8 @@ class LaserPeopleTracker:
         w_lab_l, id_l, born_edge_l, born_l, upd_l = (w_labels.tolist(), self._id.tolist(), self._born_edge.tolist(),
                                                      self._born.tolist(), upd.tolist())
         pos_w, vel_w = self._pos, self._vel
-        for row in np.flatnonzero(~gone_w).tolist():
+        pos_f, vel_f = _frozen_copy(pos_w), _frozen_copy(vel_w)
+        for row in (~gone_w).nonzero()[0].tolist():
             lab = w_lab_l[row]
             tid = id_l[row]
             sit = _SITUATION_NAMES[lab]
@@ -1018,26 +1117,28 @@ class LaserPeopleTracker:
                 sit = _APPEARING
             elif lab == _CORRELATED:
                 self._extend_correlated(tid, t_ns, pos_w[row])
-            states.append(_fast_state(t_ns, sensor, tid, pos_w[row], vel_w[row], sit, sensors if upd_l[row] else ()))
-        for i in np.flatnonzero(~gone_m):
+            states.append(_fast_state(t_ns, sensor, tid, pos_f[row], vel_f[row], sit, sensors if upd_l[row] else (),
+                                      frozen=True))
+        for i in (~gone_m).nonzero()[0].tolist():
             m = merged[i]
             sit = _DISAPPEARING_S if labels[n_w + i] == _DISAPPEARING else _MERGED_S
+            mpos, mvel = _frozen_copy(m.pos), _frozen_copy(m.vel)
             for k, info in enumerate(m.info):
-                states.append(_fast_state(t_ns, sensor, info.track_id, m.pos[k], m.vel[k], sit,
-                                          sensors if sensed_m[i] else ()))
-        for row in np.flatnonzero(dead_w):
+                states.append(_fast_state(t_ns, sensor, info.track_id, mpos[k], mvel[k], sit,
+                                          sensors if sensed_m[i] else (), frozen=True))
+        for row in dead_w.nonzero()[0]:
             self._death_event(int(self._id[row]), int(self._seen[row]), t_ns, self._pos[row], bool(edge_t[row]))
-        for i in np.flatnonzero(dead_m):
+        for i in dead_m.nonzero()[0]:
             m = merged[i]
             for k, info in enumerate(m.info):
                 self._death_event(info.track_id, m.seen, t_ns, m.pos[k], bool(edge_t[n_w + i]))
 
         # ---- apply the structure changes
-        if gone_w.any():
+        if np.count_nonzero(gone_w):
             keep = ~gone_w
             for name in self._WALKING_ARRAYS:
                 setattr(self, name, getattr(self, name)[keep])
-        if gone_m.any() or new_merged:
+        if np.count_nonzero(gone_m) or new_merged:
             self._merged = [m for m, g in zip(merged, gone_m, strict=True) if not g] + new_merged
         for m in new_merged:
             for k, info in enumerate(m.info):
@@ -1048,7 +1149,7 @@ class LaserPeopleTracker:
                                       sensors))
 
         # ---- births (B7 rule 6): candidates from unclaimed detections
-        free = np.flatnonzero(~claimed)
+        free = (~claimed).nonzero()[0]
         if free.size or len(self._cand):
             states.extend(self._births(t_ns, det, free, edge_d))
 
@@ -1065,10 +1166,11 @@ class LaserPeopleTracker:
 
     # ---------------------------------------------------------------------------------------------
     def _reacquire(self, lost: np.ndarray, cw: np.ndarray, det: DetectionArrays, claimed: np.ndarray,
-                   assigned: np.ndarray, t_ns: int) -> None:
-        """Targets that found nothing take unclaimed detections within a gate that grows while they coast."""
+                   assigned: np.ndarray, t_ns: int) -> bool:
+        """Targets that found nothing take unclaimed detections within a gate that grows while they coast.
+        Returns whether any did (their particles restarted)."""
         p = self.params
-        free = np.flatnonzero(~claimed)
+        free = (~claimed).nonzero()[0]
         miss_s = (t_ns - self._seen[lost]) / 1e9
         radius = np.minimum(2.0 * p.bandwidth_m + p.reacquire_speed_mps * miss_s, p.reacquire_max_m)
         dist = np.linalg.norm(cw[lost][:, None, :] - det.centres[free][None, :, :], axis=2)
@@ -1087,6 +1189,7 @@ class LaserPeopleTracker:
             self._w[row] = 1.0 / p.n_particles
             assigned[row] = j
             claimed[j] = True
+        return len(pairs) > 0
 
     def _merge(self, group: np.ndarray, j: int, det: DetectionArrays, t_ns: int, gone_w: np.ndarray,
                gone_m: np.ndarray) -> _Merged:
@@ -1145,7 +1248,7 @@ class LaserPeopleTracker:
             to_det[k] = int(np.argmin(cost[k]))
         parts = []
         for jj in np.unique(to_det):
-            ks = np.flatnonzero(to_det == jj)
+            ks = (to_det == jj).nonzero()[0]
             parts.append(tuple(sorted(m.info[k].track_id for k in ks)))
             j = int(dets[jj])
             if ks.size == 1:
@@ -1254,12 +1357,12 @@ class LaserPeopleTracker:
                                                      p.standing_frames, p.resume_speed_mps)
         n_p = p.n_particles
         started = was & ~self._standing
-        if started.any():  # walks again: head where the track goes
+        if np.count_nonzero(started):  # walks again: head where the track goes
             psi = np.arctan2(self._vel[started, 1], self._vel[started, 0])
             self._x[started, :, PSI] = psi[:, None] + p.init_heading_sigma_rad * self.rng.standard_normal(
                 (int(started.sum()), n_p))
         if p.reseed_fraction > 0 and dt > 0:
-            rows = np.flatnonzero(~self._standing & (speed > p.resume_speed_mps))
+            rows = (~self._standing & (speed > p.resume_speed_mps)).nonzero()[0]
             if rows.size:
                 k = max(1, round(p.reseed_fraction * n_p))
                 start = self._reseed_at

@@ -32,6 +32,7 @@ Constant-velocity state
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -136,7 +137,8 @@ class WalkingNoise:
         return cls(0.0, 0.0, 0.0, 0.0, 0.0)
 
     def scale(self, dt_s: float) -> float:
-        return 1.0 if self.dt_ref_s is None else float(np.sqrt(max(dt_s, 0.0) / self.dt_ref_s))
+        # math.sqrt: correctly rounded as np.sqrt, without the numpy scalar round trip
+        return 1.0 if self.dt_ref_s is None else math.sqrt(max(dt_s, 0.0) / self.dt_ref_s)
 
 
 @dataclass(frozen=True, slots=True)
@@ -162,7 +164,8 @@ class StandingNoise:
     dt_ref_s: float | None = None
 
     def scale(self, dt_s: float) -> float:
-        return 1.0 if self.dt_ref_s is None else float(np.sqrt(max(dt_s, 0.0) / self.dt_ref_s))
+        # math.sqrt: correctly rounded as np.sqrt, without the numpy scalar round trip
+        return 1.0 if self.dt_ref_s is None else math.sqrt(max(dt_s, 0.0) / self.dt_ref_s)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -278,7 +281,7 @@ def predict_walking(state: np.ndarray, dt_s: float, rng: np.random.Generator,
     sig = _walking_sigmas(nz, nz.scale(dt_s))
     # work on contiguous columns, (8, n_t * n_p): numpy is slow on inner axes of length 2-8
     cols = np.ascontiguousarray(x.reshape(-1, STATE_DIM).T)
-    if sig.any():
+    if np.count_nonzero(sig):
         noise_cols = standard_normal(_check_rng(rng), cols.shape)
         noise_cols *= sig[:, None]
         cols += noise_cols  # n_p, n_ψ, n_φ, n_T, n_S
@@ -379,9 +382,9 @@ def predict_people(state: np.ndarray, standing: np.ndarray, dt_s: float, rng: np
     still = np.asarray(standing, dtype=bool)
     if still.shape != (x.shape[0],):
         raise ValueError(f"standing: expected shape ({x.shape[0]},), got {still.shape}")
-    if not still.any():
+    if not np.count_nonzero(still):
         return predict_walking(x, dt_s, rng, noise)
-    if still.all():
+    if np.count_nonzero(still) == still.size:
         return predict_standing(x, dt_s, rng, standing_noise)
     out = np.empty_like(x)
     out[~still] = predict_walking(x[~still], dt_s, rng, noise)
