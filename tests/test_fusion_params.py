@@ -54,3 +54,8 @@ def test_the_track_command_reports_a_bad_fusion_table(shared_data, tmp_path):
     assert f"{cfg}: fusion" in result.stderr
     assert "check_margin" in result.stderr
     assert not (tmp_path / "out" / "tracks.csv").exists()
+
+
+def test_appearance_options_given_as_a_plain_dict_are_refused_at_once():
+    with pytest.raises(ConfigError, match="appearance"):
+        FusionParams(appearance={"map_patches": 150})

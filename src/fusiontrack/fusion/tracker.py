@@ -224,6 +224,9 @@ class FusionParams:
     appearance: AppearanceParams = field(default_factory=AppearanceParams)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.appearance, AppearanceParams):
+            raise ConfigError(f"FusionParams.appearance: expected AppearanceParams (FusionParams.from_mapping reads a "
+                              f"table), got {type(self.appearance).__name__}")
         for name in ("check_frames", "reid_frames"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
