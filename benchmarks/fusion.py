@@ -8,8 +8,9 @@ another (no parallel load on the timings):
 * camera-only: :func:`fusiontrack.vision.people.track_camera` (foreground blobs, the calibrated camera's
   floor positions);
 * fusion: :func:`fusiontrack.fusion.track_fused` (the same laser tracker + per-target classifiers: B15
-  learning, re-identification of reborn tracks, identity checks after close contacts; B16 score maps and B17
-  identities at splits are off by default, see :class:`~fusiontrack.fusion.FusionParams`), through the camera
+  learning, B16 score maps weighting the particles of targets close to each other, re-identification of reborn
+  tracks, identity checks after close contacts; B17 identities at splits are off by default, see
+  :class:`~fusiontrack.fusion.FusionParams`), through the camera
   corrected by the horizontal bias it learns first over the beginning of the recording (seed 000; ``crowd``'s
   camera is 3 degrees off its calibration; ``--no-bias``: through the camera as calibrated). The learnt bias of
   every run is printed (the time column includes learning it).

@@ -2,8 +2,8 @@
 
 * :class:`FusionTracker` — the laser people tracker whose noncorrelated targets train online per-target
   appearance classifiers; those classifiers check identities after close contact (exchanging them back when
-  the laser swapped them) and give a reborn track the id of the person it recognises. Optional (off by default,
-  :class:`FusionParams`): their score maps as the observation of correlated targets (B16) and the identities of
+  the laser swapped them), give a reborn track the id of the person it recognises, and their score maps are the
+  observation of correlated targets (B16). Optional (off by default, :class:`FusionParams`): the identities of
   the pieces of a split decided by appearance (B17);
 * :func:`track_fused` — the same over a recording (the ``people`` pipeline of ``fusiontrack track``), through
   the camera corrected by the horizontal bias it first learns against the lasers (:func:`learn_camera_bias`,
