@@ -139,6 +139,12 @@ def test_primed_bias_pass_converges_to_the_true_misalignment(crowd):
     ready = _online_ready_ns(scans, BiasParams().bg_n_init)
     corrections = {k: -round(v * 1e6) for k, v in crowd["offsets_ms"].items()}
     bias = learn_camera_bias(crowd["path"], "camera_0", clock_corrections_ns=corrections, background="prime")
+    with Recording(crowd["path"]) as rec:  # read through the caller's open recording (as track_fused does)
+        shared = learn_camera_bias(crowd["path"], "camera_0", clock_corrections_ns=corrections, background="prime",
+                                   recording=rec)
+        assert next(iter(rec.messages(["/camera_0/image"])), None) is not None  # left open for the caller
+    for field in ("t_ns", "bias_rad", "n_used"):  # the same pass
+        np.testing.assert_array_equal(getattr(shared.history, field), getattr(bias.history, field))
     h = bias.history
     assert h.t_ns[np.flatnonzero(h.n_used)[0]] < ready
     assert bias.settled

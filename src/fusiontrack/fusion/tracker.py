@@ -63,7 +63,7 @@ import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -75,6 +75,9 @@ from ..types import Detection, Event, Image, Situation, TrackState
 from ..vision.appearance import AppearanceBank, AppearanceParams
 from ..vision.cvthreads import opencv_threads
 from ..vision.patches import box_visibility
+
+if TYPE_CHECKING:
+    from ..io.recording import Recording
 
 __all__ = ["BiasLearning", "CameraBias", "FrameSource", "FusionParams", "FusionStats", "FusionTracker", "Relabel",
            "learn_camera_bias", "relabel_states", "track_fused"]
@@ -1223,7 +1226,8 @@ def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCame
                       lasers: Mapping[str, Any] | None = None, learning: BiasLearning | None = None,
                       clock_corrections_ns: Mapping[str, int] | None = None, world_frame: str = "world",
                       image_topic: str | None = None, vision_width_px: int | None = 320,
-                      background: str = "prime", max_prime_scans: int | None = None) -> CameraBias:
+                      background: str = "prime", max_prime_scans: int | None = None,
+                      recording: Recording | None = None) -> CameraBias:
     """Learn a camera's horizontal bias against the lasers over the beginning of a recording (seed 000, A0–A10).
 
     Like :func:`~fusiontrack.calibration.bias_run.bias_from_recording`, but stops as soon as the bias has
@@ -1269,6 +1273,9 @@ def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCame
         (A1's MOG2 foreground) learns online either way. The priming's time is part of ``seconds``.
     max_prime_scans : int, optional
 
+    recording : Recording, optional
+        An open :class:`~fusiontrack.io.Recording` of ``path`` to read through (the caller closes it) instead of
+        opening ``path`` again for the setup, the priming and the pass (:func:`track_fused` passes its own).
     Returns
     -------
     CameraBias
@@ -1293,7 +1300,7 @@ def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCame
                               clock_offsets_ms=offsets_ms, world_frame=world_frame,
                               cam2world=None if camera is None else camera.cam2world, laser2world=lasers,
                               image_topic=image_topic, vision_width_px=vision_width_px,
-                              foreground=ForegroundParams(stopped=None))
+                              foreground=ForegroundParams(stopped=None), recording=recording)
     if camera is not None:
         inputs = dataclasses.replace(inputs, camera=camera)
     tic = time.perf_counter()
@@ -1434,8 +1441,9 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
                                        clock_corrections_ns=laser_corrections))
         bias = None
         if camera is not None and learning is not None and first_path is not None:
+            # one file: the bias pass reads through cam_rec (the camera frames read it only afterwards)
             bias = _learn_bias(first_path, cam_sensor, image_topic, camera, poses, learning, corrections,
-                               world_frame, background)
+                               world_frame, background, cam_rec if first_path is path else None)
             if bias is not None:
                 camera = bias.corrected_camera
                 if timings is not None:
@@ -1464,12 +1472,13 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
 
 def _learn_bias(path: str | Path, cam_sensor: str, image_topic: str | None, camera: PinholeCamera,
                 poses: Mapping[str, np.ndarray], learning: BiasLearning, corrections: Mapping[str, int],
-                world_frame: str, background: str = "prime") -> CameraBias | None:
+                world_frame: str, background: str = "prime",
+                recording: Recording | None = None) -> CameraBias | None:
     """:func:`learn_camera_bias` for :func:`track_fused`: None (with a warning) when it cannot be learnt."""
     try:
         bias = learn_camera_bias(path, cam_sensor, camera=camera, lasers=poses, learning=learning,
                                  clock_corrections_ns=corrections, world_frame=world_frame,
-                                 image_topic=image_topic, background=background)
+                                 image_topic=image_topic, background=background, recording=recording)
     except (RecordingError, ValueError) as err:  # no usable calibration or images: fuse as calibrated
         log.warning("camera bias not learnt (%s): the camera is used as calibrated", err)
         return None
