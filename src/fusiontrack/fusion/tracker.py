@@ -68,6 +68,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from ..calibration.bias import BiasHistory, BiasParams
+from ..calibration.bias_run import check_background
 from ..errors import ConfigError, RecordingError
 from ..geometry import PinholeCamera
 from ..tracking.tracker import LaserPeopleTracker, TrackerParams, run_tracker
@@ -1289,7 +1290,7 @@ def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCame
     ConfigError
         ``background`` is neither ``"prime"`` nor ``"learn"``.
     """
-    from ..calibration.bias_run import bias_settled, check_background, open_bias_inputs
+    from ..calibration.bias_run import bias_settled, open_bias_inputs
     from ..types import LaserScan
     from ..vision.foreground import ForegroundParams
 
@@ -1431,8 +1432,7 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
             camera, cam_sensor = None, ""
         p = params or FusionParams()
         total = sum(c.msgcount for c in rec.connections if c.topic in lasers)  # from the index or metadata
-        if background not in ("prime", "learn"):
-            raise ConfigError(f"background: expected 'prime' or 'learn', got {background!r}")
+        check_background(background)
         detector, poses = detector_for_recording(rec, lasers, time_source=time_source, world_frame=world_frame,
                                                  background="learn", detector_params=detector_params)
         laser_corrections = {k: v for k, v in corrections.items() if k != cam_sensor}
