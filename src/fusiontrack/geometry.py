@@ -360,12 +360,17 @@ class PinholeCamera:
         p, z = self._depth(points_world)
         with np.errstate(divide="ignore", invalid="ignore"):
             x, y = p[:, 0] / z, p[:, 1] / z
-        k1, k2, p1, p2, k3, k4, k5, k6 = np.pad(self.dist, (0, 8 - self.dist.size))
-        r2 = x * x + y * y
-        radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
-        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
-        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-        uv = np.column_stack([self.K[0, 0] * xd + self.K[0, 2], self.K[1, 1] * yd + self.K[1, 2]])
+        coeffs = self.dist.tolist()  # Python floats: scalar arithmetic on tiny arrays costs less than with np.pad's
+        k1, k2, p1, p2, k3, k4, k5, k6 = coeffs + [0.0] * (8 - len(coeffs))
+        if any(coeffs):
+            r2 = x * x + y * y
+            radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+            x, y = (x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
+                    y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)
+        K = self.K
+        uv = np.empty((len(x), 2))
+        uv[:, 0] = K[0, 0] * x + K[0, 2]
+        uv[:, 1] = K[1, 1] * y + K[1, 2]
         uv[~(z > 0)] = np.nan
         return uv
 
