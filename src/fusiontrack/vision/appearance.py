@@ -226,19 +226,24 @@ class BoostedClassifier:
         x = np.asarray(features)
         if x.ndim != 2 or x.shape[1] != self.n_features:
             raise ValueError(f"features: expected (n, {self.n_features}) values, got shape {x.shape}")
-        x32 = x.astype(np.float32).astype(np.float64)  # scikit-learn compares float32 features
         m, n = self.n_learners, len(x)
         if m == 0 or n == 0:
             return np.zeros((m, n))
-        rows = np.arange(m)[:, None]
-        cols = np.arange(n)[None, :]
+        x32 = x.astype(np.float32).astype(np.float64).ravel()  # scikit-learn compares float32 features
+        # flat indices into the (M, max_nodes) node tables and the (n, d) features: ``take`` on a flat index
+        # costs half of two-dimensional fancy indexing at these sizes (tens of learners, hundreds of patches)
+        base = (np.arange(m) * self._left.shape[1])[:, None]
+        col = (np.arange(n) * self.n_features)[None, :]
+        left_t, right_t = self._left.ravel(), self._right.ravel()
+        feature_t, threshold_t = self._feature.ravel(), self._threshold.ravel()
         node = np.zeros((m, n), np.int64)
         for _ in range(self.params.max_depth):  # one step down every tree at once per level
-            left = self._left[rows, node]
-            value = x32[cols, np.maximum(self._feature[rows, node], 0)]
-            nxt = np.where(value <= self._threshold[rows, node], left, self._right[rows, node])
+            at = base + node
+            left = left_t.take(at)
+            value = x32.take(col + np.maximum(feature_t.take(at), 0))
+            nxt = np.where(value <= threshold_t.take(at), left, right_t.take(at))
             node = np.where(left >= 0, nxt, node)
-        return self._output[rows, node]
+        return self._output.ravel().take(base + node)
 
     def margin(self, features: np.ndarray) -> np.ndarray:
         """Strong score ``H(s) = Σ_m α_m h_m(s)`` ``(n,)`` (B14)."""
