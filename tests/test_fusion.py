@@ -44,6 +44,13 @@ def pair(tmp_path_factory: pytest.TempPathFactory) -> dict:
     return {"path": path, "gt": gt, "truth": situation_events(gt, bounds), "kw": kw}
 
 
+@pytest.fixture(scope="module")
+def pair_laser(pair: dict) -> list:
+    """Laser-only tracks of the pair (the people tracker, seed 0), which two tests compare the fused tracks with."""
+    laser, _ = track_recording(pair["path"], params=SIM_PF, **pair["kw"])
+    return laser
+
+
 def _track_at(states, gt, agent: int, t_ns: int) -> int | None:
     """The track nearest (within 0.5 m) to the agent at the truth instant nearest to ``t_ns``."""
     g = min(gt, key=lambda g: abs(g.t_ns - t_ns))
@@ -105,7 +112,7 @@ class _Blackout:
         return self.frames.at(t_ns)
 
 
-def test_camera_blackout_leaves_laser_tracking_intact_and_learning_resumes(pair):
+def test_camera_blackout_leaves_laser_tracking_intact_and_learning_resumes(pair, pair_laser):
     gt = pair["gt"]
     t_merge = min(e.t_ns for e in pair["truth"] if e.kind == "merge")
     t0, t1 = t_merge - 2_500_000_000, t_merge + 500_000_000  # no camera while the two approach and meet
@@ -117,7 +124,7 @@ def test_camera_blackout_leaves_laser_tracking_intact_and_learning_resumes(pair)
 
     states, _, stats = track_fused(pair["path"], tracker_params=SIM_PF, frames_wrapper=blackout, adaptive_bias=False,
                                    **pair["kw"])
-    laser, _ = track_recording(pair["path"], params=SIM_PF, **pair["kw"])
+    laser = pair_laser
     read = np.array(wrappers[0].read)
     assert not ((read >= t0) & (read <= t1)).any()  # no image was read during the blackout
     # laser tracking intact: during the blackout the fused tracker is the laser tracker
@@ -707,14 +714,14 @@ def _same_tracks(a, b) -> bool:
         and np.array_equal(x.position_m, y.position_m) for x, y in zip(a, b, strict=True))
 
 
-def test_fusion_with_a_black_camera_gives_exactly_the_laser_only_tracks(pair):
+def test_fusion_with_a_black_camera_gives_exactly_the_laser_only_tracks(pair, pair_laser):
     """Paired comparison: the fused tracker's laser filters draw laser-only's random stream, so where the camera
     changes nothing (here: it never delivers an image, though the two people meet, merge and split) the tracks
     are the laser-only ones, state for state."""
     wrappers: list[_Black] = []
     fused, _, stats = track_fused(pair["path"], tracker_params=SIM_PF, adaptive_bias=False,
                                   frames_wrapper=lambda f: wrappers.append(_Black(f)) or wrappers[-1], **pair["kw"])
-    laser, _ = track_recording(pair["path"], params=SIM_PF, **pair["kw"])
+    laser = pair_laser  # track_recording(pair["path"], params=SIM_PF, **pair["kw"])
     assert wrappers[0].asked > 0  # the fused tracker did ask for images (the two came within 1.5 m)
     assert stats.frames_used == 0
     assert laser
