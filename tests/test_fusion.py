@@ -31,11 +31,10 @@ SIM_PF = {"lateral_m": 0.2}  # the simulator's feet are 0.2 m apart side by side
 
 
 @pytest.fixture(scope="module")
-def pair(tmp_path_factory: pytest.TempPathFactory) -> dict:
-    scenario = load_scenario("groups").with_overrides(seconds=20, seed=2,
-                                                      settings={"agents.n_groups": 1, "agents.n_singles": 0})
-    path: Path = tmp_path_factory.mktemp("fusion") / "pair"
-    simulate(scenario, path)
+def pair(simulated) -> dict:
+    settings = {"agents.n_groups": 1, "agents.n_singles": 0}
+    scenario = load_scenario("groups").with_overrides(seconds=20, seed=2, settings=settings)
+    path: Path = simulated("groups", seconds=20, seed=2, settings=settings)
     bounds = Simulation(scenario).world.bounds_m
     with Recording(path) as rec:
         gt = list(rec.messages(["/ground_truth"]))
@@ -464,12 +463,11 @@ YAW_ERROR_DEG = 3.0
 
 
 @pytest.fixture(scope="module")
-def crowd(tmp_path_factory: pytest.TempPathFactory) -> dict:
+def crowd(simulated) -> dict:
     """14 s of ``crowd`` whose camera is turned 3 degrees from its calibration, tracked by the people pipeline."""
-    scenario = load_scenario("crowd").with_overrides(seconds=14, seed=0,
-                                                     settings={"cameras.0.yaw_bias_deg": YAW_ERROR_DEG})
-    path: Path = tmp_path_factory.mktemp("fusion_bias") / "crowd"
-    simulate(scenario, path)
+    settings = {"cameras.0.yaw_bias_deg": YAW_ERROR_DEG}
+    scenario = load_scenario("crowd").with_overrides(seconds=14, seed=0, settings=settings)
+    path: Path = simulated("crowd", seconds=14, seed=0, settings=settings)  # test_calibration_simulated.py's too
     with Recording(path) as rec:
         gt = [g for g in rec.messages(["/ground_truth"]) if isinstance(g, GroundTruth)]
         boxes = [g for g in rec.messages(["/ground_truth/camera_0"]) if isinstance(g, GroundTruth)]

@@ -16,7 +16,7 @@ from fusiontrack.laser import LaserPeopleDetector
 from fusiontrack.sim.agents import feet_positions
 from fusiontrack.sim.laser import cast_rays
 from fusiontrack.sim.scenario import load_scenario
-from fusiontrack.sim.simulator import Simulation, simulate
+from fusiontrack.sim.simulator import Simulation
 from fusiontrack.tracking.baseline import CVKalmanTracker
 from fusiontrack.tracking.tracker import LaserPeopleTracker, TrackerParams, track_recording
 from fusiontrack.types import Detection, GroundTruth, LaserScan, Situation, TrackState
@@ -324,10 +324,9 @@ def test_out_of_order_scans_do_not_stop_tracking() -> None:
 
 
 @pytest.fixture(scope="module")
-def crowd20(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, np.ndarray, dict[str, int], list[GroundTruth]]:
+def crowd20(simulated) -> tuple[Path, np.ndarray, dict[str, int], list[GroundTruth]]:
     scenario = load_scenario("crowd").with_overrides(seconds=20, seed=1, settings={"cameras": []})
-    out = tmp_path_factory.mktemp("crowd") / "crowd20"
-    simulate(scenario, out)
+    out = simulated("crowd", seconds=20, seed=1, settings={"cameras": []})
     bounds = Simulation(scenario).world.bounds_m
     corrections = {c.name: -round(c.clock_offset_ms * 1e6) for c in scenario.config.lasers}
     with Recording(out) as rec:

@@ -17,8 +17,6 @@ from fusiontrack.eval.vehicles import evaluate_vehicles
 from fusiontrack.fusion.objects import DetectionBuffer
 from fusiontrack.fusion.traffic import TrafficParams, roads_of, track_traffic
 from fusiontrack.io.recording import Recording
-from fusiontrack.sim.scenario import load_scenario
-from fusiontrack.sim.simulator import simulate
 from fusiontrack.types import GroundTruth, Image
 
 AREA = [(-45, -9), (45, -9), (45, 9), (-45, 9)]
@@ -32,9 +30,8 @@ def _after_warm_up(gt, states):
 
 
 @pytest.fixture(scope="module")
-def road(tmp_path_factory):
-    out = tmp_path_factory.mktemp("road") / "road"
-    simulate(load_scenario("road").with_overrides(seconds=SECONDS, seed=0), out)
+def road(simulated):
+    out = simulated("road", seconds=SECONDS, seed=0)
     with Recording(out) as rec:
         gt = [g for g in rec.messages(["/ground_truth"]) if isinstance(g, GroundTruth)]
     return out, gt
