@@ -22,19 +22,18 @@ from fusiontrack.errors import ConfigError, RecordingError
 from fusiontrack.fusion import learn_camera_bias, track_fused
 from fusiontrack.io.recording import Recording
 from fusiontrack.sim.scenario import load_scenario
-from fusiontrack.sim.simulator import Simulation, simulate
+from fusiontrack.sim.simulator import Simulation
 from fusiontrack.types import GroundTruth
 
 YAW_ERROR_DEG = 3.0
 
 
 @pytest.fixture(scope="module")
-def crowd(tmp_path_factory: pytest.TempPathFactory) -> dict:
+def crowd(simulated) -> dict:
     """9 s of ``crowd`` (two lasers at 25 Hz, a camera at 15 Hz) whose camera is turned 3 degrees."""
-    scenario = load_scenario("crowd").with_overrides(seconds=9, seed=0,
-                                                     settings={"cameras.0.yaw_bias_deg": YAW_ERROR_DEG})
-    path: Path = tmp_path_factory.mktemp("bias_priming") / "crowd"
-    simulate(scenario, path)
+    settings = {"cameras.0.yaw_bias_deg": YAW_ERROR_DEG}
+    scenario = load_scenario("crowd").with_overrides(seconds=9, seed=0, settings=settings)
+    path: Path = simulated("crowd", seconds=9, seed=0, settings=settings)
     offsets_ms = {c.name: c.clock_offset_ms for c in [*scenario.config.lasers, *scenario.config.cameras]}
     with Recording(path) as rec:
         boxes = [g for g in rec.messages(["/ground_truth/camera_0"]) if isinstance(g, GroundTruth)]

@@ -18,17 +18,17 @@ from fusiontrack.config import load_config
 from fusiontrack.errors import RecordingError
 from fusiontrack.geometry import PinholeCamera
 from fusiontrack.sim.scenario import load_scenario
-from fusiontrack.sim.simulator import Simulation, simulate
+from fusiontrack.sim.simulator import Simulation
 from fusiontrack.types import LaserScan
 
 BIAS_DEG = 3.0
 
 
 @pytest.fixture(scope="module")
-def crowd(tmp_path_factory: pytest.TempPathFactory) -> dict:
-    scenario = load_scenario("crowd").with_overrides(seconds=14, seed=0, settings={"cameras.0.yaw_bias_deg": BIAS_DEG})
-    out = tmp_path_factory.mktemp("bias") / "crowd"
-    simulate(scenario, out)
+def crowd(simulated) -> dict:
+    settings = {"cameras.0.yaw_bias_deg": BIAS_DEG}
+    scenario = load_scenario("crowd").with_overrides(seconds=14, seed=0, settings=settings)
+    out = simulated("crowd", seconds=14, seed=0, settings=settings)  # the recording test_fusion.py's crowd uses
     offsets = {c.name: c.clock_offset_ms for c in [*scenario.config.lasers, *scenario.config.cameras]}
     inputs = open_bias_inputs(out, "camera_0", clock_offsets_ms=offsets)
     estimators = {rho: inputs.estimator(BiasParams(rho=rho)) for rho in (0.1, 0.5)}

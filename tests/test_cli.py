@@ -212,9 +212,11 @@ def test_train_classifier_writes_a_model_that_loads(shared_data, tmp_path):
 
     target = tmp_path / "model.json"
     out = run("train-classifier", "-o", str(target), "--work", str(tmp_path / "work"), "--data", str(shared_data),
-              "--crowd-seconds", "6", "--road-seconds", "20", "--rounds", "20").stdout
+              "--crowd-seconds", "3", "--road-seconds", "10", "--rounds", "20").stdout
     assert "balanced accuracy" in out
     model = ObjectClassifier.load(target)
+    # the CLI's contract on short runs (3 s crowds, 10 s roads: the training runs still hold people, bicycles and
+    # cars); the shipped model's accuracy is checked in test_laser_classifier.py
     assert model.classes == ("person", "bicycle", "car")
     assert model.alpha.size == 20
 

@@ -31,17 +31,23 @@ SIM_PF = {"lateral_m": 0.2}  # the simulator's feet are 0.2 m apart side by side
 
 
 @pytest.fixture(scope="module")
-def pair(tmp_path_factory: pytest.TempPathFactory) -> dict:
-    scenario = load_scenario("groups").with_overrides(seconds=20, seed=2,
-                                                      settings={"agents.n_groups": 1, "agents.n_singles": 0})
-    path: Path = tmp_path_factory.mktemp("fusion") / "pair"
-    simulate(scenario, path)
+def pair(simulated) -> dict:
+    settings = {"agents.n_groups": 1, "agents.n_singles": 0}
+    scenario = load_scenario("groups").with_overrides(seconds=20, seed=2, settings=settings)
+    path: Path = simulated("groups", seconds=20, seed=2, settings=settings)
     bounds = Simulation(scenario).world.bounds_m
     with Recording(path) as rec:
         gt = list(rec.messages(["/ground_truth"]))
     kw = {"area_m": bounds, "clock_corrections_ns": {c.name: -round(c.clock_offset_ms * 1e6)
                                                       for c in scenario.config.lasers}}
     return {"path": path, "gt": gt, "truth": situation_events(gt, bounds), "kw": kw}
+
+
+@pytest.fixture(scope="module")
+def pair_laser(pair: dict) -> list:
+    """Laser-only tracks of the pair (the people tracker, seed 0), which two tests compare the fused tracks with."""
+    laser, _ = track_recording(pair["path"], params=SIM_PF, **pair["kw"])
+    return laser
 
 
 def _track_at(states, gt, agent: int, t_ns: int) -> int | None:
@@ -105,7 +111,7 @@ class _Blackout:
         return self.frames.at(t_ns)
 
 
-def test_camera_blackout_leaves_laser_tracking_intact_and_learning_resumes(pair):
+def test_camera_blackout_leaves_laser_tracking_intact_and_learning_resumes(pair, pair_laser):
     gt = pair["gt"]
     t_merge = min(e.t_ns for e in pair["truth"] if e.kind == "merge")
     t0, t1 = t_merge - 2_500_000_000, t_merge + 500_000_000  # no camera while the two approach and meet
@@ -117,7 +123,7 @@ def test_camera_blackout_leaves_laser_tracking_intact_and_learning_resumes(pair)
 
     states, _, stats = track_fused(pair["path"], tracker_params=SIM_PF, frames_wrapper=blackout, adaptive_bias=False,
                                    **pair["kw"])
-    laser, _ = track_recording(pair["path"], params=SIM_PF, **pair["kw"])
+    laser = pair_laser
     read = np.array(wrappers[0].read)
     assert not ((read >= t0) & (read <= t1)).any()  # no image was read during the blackout
     # laser tracking intact: during the blackout the fused tracker is the laser tracker
@@ -457,12 +463,11 @@ YAW_ERROR_DEG = 3.0
 
 
 @pytest.fixture(scope="module")
-def crowd(tmp_path_factory: pytest.TempPathFactory) -> dict:
+def crowd(simulated) -> dict:
     """14 s of ``crowd`` whose camera is turned 3 degrees from its calibration, tracked by the people pipeline."""
-    scenario = load_scenario("crowd").with_overrides(seconds=14, seed=0,
-                                                     settings={"cameras.0.yaw_bias_deg": YAW_ERROR_DEG})
-    path: Path = tmp_path_factory.mktemp("fusion_bias") / "crowd"
-    simulate(scenario, path)
+    settings = {"cameras.0.yaw_bias_deg": YAW_ERROR_DEG}
+    scenario = load_scenario("crowd").with_overrides(seconds=14, seed=0, settings=settings)
+    path: Path = simulated("crowd", seconds=14, seed=0, settings=settings)  # test_calibration_simulated.py's too
     with Recording(path) as rec:
         gt = [g for g in rec.messages(["/ground_truth"]) if isinstance(g, GroundTruth)]
         boxes = [g for g in rec.messages(["/ground_truth/camera_0"]) if isinstance(g, GroundTruth)]
@@ -707,14 +712,14 @@ def _same_tracks(a, b) -> bool:
         and np.array_equal(x.position_m, y.position_m) for x, y in zip(a, b, strict=True))
 
 
-def test_fusion_with_a_black_camera_gives_exactly_the_laser_only_tracks(pair):
+def test_fusion_with_a_black_camera_gives_exactly_the_laser_only_tracks(pair, pair_laser):
     """Paired comparison: the fused tracker's laser filters draw laser-only's random stream, so where the camera
     changes nothing (here: it never delivers an image, though the two people meet, merge and split) the tracks
     are the laser-only ones, state for state."""
     wrappers: list[_Black] = []
     fused, _, stats = track_fused(pair["path"], tracker_params=SIM_PF, adaptive_bias=False,
                                   frames_wrapper=lambda f: wrappers.append(_Black(f)) or wrappers[-1], **pair["kw"])
-    laser, _ = track_recording(pair["path"], params=SIM_PF, **pair["kw"])
+    laser = pair_laser  # track_recording(pair["path"], params=SIM_PF, **pair["kw"])
     assert wrappers[0].asked > 0  # the fused tracker did ask for images (the two came within 1.5 m)
     assert stats.frames_used == 0
     assert laser

@@ -31,32 +31,30 @@ LIGHTS_OFF_S, LIGHTS_ON_S = 9.5, 11.0
 SECONDS = 14.0
 
 
-def _scenario():
-    base = load_scenario("wearable_lights")
+def _settings() -> dict:
     cameras = []
-    for c in base.config.model_dump()["cameras"]:
+    for c in load_scenario("wearable_lights").config.model_dump()["cameras"]:
         if c["name"] in ("rgbd_0", "rgbd_1", "video_0"):
             c["illumination"] = [(LIGHTS_OFF_S, 0.25), (LIGHTS_ON_S, 1.0)]
             if c["name"] == "video_0":
                 c.update(width=320, height=240, fx=200.0, fy=200.0)
             cameras.append(c)
-    return base.with_overrides(seconds=SECONDS, seed=1, settings={"agents.still_s": 4.0, "agents.stagger_s": 2.0,
-                                                                   "cameras": cameras})
+    return {"agents.still_s": 4.0, "agents.stagger_s": 2.0, "cameras": cameras}
 
 
 @pytest.fixture(scope="module")
-def scene(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("wearable")
-    sim = Simulation(_scenario())
-    carriers = {p.phone: p.agent_id for p in sim.pedestrian_plans if p.phone}
-    sim.run(folder / "rec")
+def scene(simulated):
+    settings = _settings()
+    sim = Simulation(load_scenario("wearable_lights").with_overrides(seconds=SECONDS, seed=1, settings=settings))
+    carriers = {p.phone: p.agent_id for p in sim.pedestrian_plans if p.phone}  # the plans, without running it
+    recording = simulated("wearable_lights", seconds=SECONDS, seed=1, settings=settings)
     truth: dict[int, list] = {}
-    with open(folder / "rec" / "ground_truth" / "agents.csv", newline="") as f:
+    with open(recording / "ground_truth" / "agents.csv", newline="") as f:
         for r in csv.DictReader(f):
             truth.setdefault(int(r["id"]), []).append((int(r["t_ns"]), float(r["x"]), float(r["y"]),
                                                        float(r["heading"])))
-    result = track_wearable(folder / "rec", WearableParams(cameras=("video_0",)))
-    return folder, carriers, {k: np.array(v) for k, v in truth.items()}, result
+    result = track_wearable(recording, WearableParams(cameras=("video_0",)))
+    return recording, carriers, {k: np.array(v) for k, v in truth.items()}, result
 
 
 def _truth_at(track: np.ndarray, t_ns: np.ndarray) -> np.ndarray:
@@ -86,7 +84,7 @@ def _edited_copy(src: Path, dst: Path, *, drop: dict[str, tuple[float, float]] |
 
 
 def test_each_phone_owns_the_detections_of_its_carrier(scene):
-    _folder, carriers, truth, result = scene
+    _recording, carriers, truth, result = scene
     names = sorted(result.people)
     assert set(names) == set(carriers)
     owned = 0
@@ -105,14 +103,14 @@ def test_each_phone_owns_the_detections_of_its_carrier(scene):
 
 
 def test_corrected_trajectories_beat_dead_reckoning(scene):
-    folder, carriers, truth, result = scene
+    recording, carriers, truth, result = scene
     for phone, pr in result.people.items():
         xs = truth[carriers[phone]]
         sel = pr.corrected
         assert sel.mean() > 0.9
         err = np.linalg.norm(pr.xy_m[sel] - _truth_at(xs, pr.t_ns[sel]), axis=1)
         # dead reckoning alone, started from the true start pose (the best a phone can do without fixes)
-        with Recording(folder / "rec") as rec:
+        with Recording(recording) as rec:
             imu = [m for m in rec.messages([f"/{phone}/imu"])]
         t = np.array([m.t_ns for m in imu], np.int64)
         pdr = run_pdr(t, np.array([m.accel_mps2 for m in imu]), np.array([m.gyro_radps for m in imu]),
@@ -121,7 +119,7 @@ def test_corrected_trajectories_beat_dead_reckoning(scene):
         assert err.mean() < err_dr.mean()
         assert err.mean() < 0.35
         # step count and distance against the simulator's heel strikes and path
-        with open(folder / "rec" / "ground_truth" / "steps.csv", newline="") as f:
+        with open(recording / "ground_truth" / "steps.csv", newline="") as f:
             true_steps = sum(int(r["id"]) == carriers[phone] for r in csv.DictReader(f))
         assert abs(pr.step_count - true_steps) <= 2
         path = np.sum(np.linalg.norm(np.diff(xs[:, 1:3], axis=0), axis=1))
@@ -129,9 +127,9 @@ def test_corrected_trajectories_beat_dead_reckoning(scene):
 
 
 def test_lights_off_failures_are_detected_and_recovered(scene):
-    folder, carriers, _truth, result = scene
+    recording, carriers, _truth, result = scene
     boxes = {}
-    with open(folder / "rec" / "ground_truth" / "camera_video_0.csv", newline="") as f:
+    with open(recording / "ground_truth" / "camera_video_0.csv", newline="") as f:
         for r in csv.DictReader(f):
             boxes[(int(r["stamp_ns"]), int(r["id"]))] = [float(r[k]) for k in ("u_min", "v_min", "u_max", "v_max")]
     off, on = T0_NS + round(LIGHTS_OFF_S * 1e9), T0_NS + round(LIGHTS_ON_S * 1e9)
@@ -170,8 +168,8 @@ def test_lights_off_failures_are_detected_and_recovered(scene):
 
 
 def test_bad_input_degrades(scene, tmp_path):
-    folder, carriers, truth, _ = scene
-    rec = _edited_copy(folder / "rec", tmp_path / "bad", drop={"phone_a": (7.0, 9.0), "phone_b": (10.0, 99.0)},
+    recording, carriers, truth, _ = scene
+    rec = _edited_copy(recording, tmp_path / "bad", drop={"phone_a": (7.0, 9.0), "phone_b": (10.0, 99.0)},
                        blank={"rgbd_0": (10.0, 99.0)}, images=("video_0",))
     summary = run_wearable(rec, tmp_path / "out", cameras=["video_0"])
     a, b = summary["people"]["phone_a"], summary["people"]["phone_b"]
@@ -224,8 +222,8 @@ def test_bad_input_degrades(scene, tmp_path):
 
 
 def test_nobody_seen_by_rgbd_keeps_dead_reckoning_and_says_so(scene, tmp_path):
-    folder, carriers, truth, _ = scene
-    rec = _edited_copy(folder / "rec", tmp_path / "blind", blank={"all": (0.0, 99.0)})
+    recording, carriers, truth, _ = scene
+    rec = _edited_copy(recording, tmp_path / "blind", blank={"all": (0.0, 99.0)})
     result = track_wearable(rec, WearableParams(visual=False))
     assert len(result.inputs.detections) == 0
     assert sum(result.inputs.empty_depth_frames.values()) == sum(result.inputs.depth_frames.values()) > 0
@@ -265,17 +263,17 @@ def test_cli_track_wearable_writes_each_phone_s_results(scene, tmp_path):
     import subprocess
     import sys
 
-    folder, carriers, _, _ = scene
+    recording, carriers, _, _ = scene
     cfg = tmp_path / "w.toml"
     cfg.write_text('[wearable]\ncameras = ["video_0"]\n')
     out = tmp_path / "out"
-    r = subprocess.run([sys.executable, "-m", "fusiontrack", "track", str(folder / "rec"), "--pipeline", "wearable",
+    r = subprocess.run([sys.executable, "-m", "fusiontrack", "track", str(recording), "--pipeline", "wearable",
                         "-c", str(cfg), "-o", str(out)], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert set(summary["people"]) == set(carriers)
     steps: dict[int, int] = {}
-    with open(folder / "rec" / "ground_truth" / "steps.csv", newline="") as f:
+    with open(recording / "ground_truth" / "steps.csv", newline="") as f:
         for row in csv.DictReader(f):
             steps[int(row["id"])] = steps.get(int(row["id"]), 0) + 1
     for phone, agent in carriers.items():
@@ -284,7 +282,7 @@ def test_cli_track_wearable_writes_each_phone_s_results(scene, tmp_path):
         assert (out / name).stat().st_size > 0
     bad = tmp_path / "bad.toml"
     bad.write_text("[wearable]\nno_such_option = 1\n")
-    r = subprocess.run([sys.executable, "-m", "fusiontrack", "track", str(folder / "rec"), "--pipeline", "wearable",
+    r = subprocess.run([sys.executable, "-m", "fusiontrack", "track", str(recording), "--pipeline", "wearable",
                         "-c", str(bad), "-o", str(out)], capture_output=True, text=True, timeout=120)
     assert r.returncode == 2
     assert "no_such_option" in r.stderr

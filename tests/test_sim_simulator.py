@@ -131,7 +131,10 @@ def test_true_camera_pose_reproduces_the_boxes_and_the_calibrated_one_is_3_degre
 
 
 def test_phone_steps_match_a_plain_peak_count(tmp_path):
-    scenario = load_scenario("corridor").with_overrides(seconds=45, seed=2, settings={"agents.n_passers": 0})
+    # no RGB-D cameras: each sensor draws from its own generator, so the phone and the truth are the same without
+    # them (checked: identical IMU samples, steps and positions), and rendering them was two thirds of the time
+    scenario = load_scenario("corridor").with_overrides(seconds=45, seed=2,
+                                                        settings={"agents.n_passers": 0, "cameras": []})
     simulate(scenario, tmp_path / "p")
     with Recording(tmp_path / "p") as rec:
         imu = [m for m in rec.messages(["/phone/imu"]) if isinstance(m, ImuSample)]

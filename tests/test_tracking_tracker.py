@@ -16,7 +16,7 @@ from fusiontrack.laser import LaserPeopleDetector
 from fusiontrack.sim.agents import feet_positions
 from fusiontrack.sim.laser import cast_rays
 from fusiontrack.sim.scenario import load_scenario
-from fusiontrack.sim.simulator import Simulation, simulate
+from fusiontrack.sim.simulator import Simulation
 from fusiontrack.tracking.baseline import CVKalmanTracker
 from fusiontrack.tracking.tracker import LaserPeopleTracker, TrackerParams, track_recording
 from fusiontrack.types import Detection, GroundTruth, LaserScan, Situation, TrackState
@@ -324,10 +324,9 @@ def test_out_of_order_scans_do_not_stop_tracking() -> None:
 
 
 @pytest.fixture(scope="module")
-def crowd20(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, np.ndarray, dict[str, int], list[GroundTruth]]:
+def crowd20(simulated) -> tuple[Path, np.ndarray, dict[str, int], list[GroundTruth]]:
     scenario = load_scenario("crowd").with_overrides(seconds=20, seed=1, settings={"cameras": []})
-    out = tmp_path_factory.mktemp("crowd") / "crowd20"
-    simulate(scenario, out)
+    out = simulated("crowd", seconds=20, seed=1, settings={"cameras": []})
     bounds = Simulation(scenario).world.bounds_m
     corrections = {c.name: -round(c.clock_offset_ms * 1e6) for c in scenario.config.lasers}
     with Recording(out) as rec:
@@ -343,11 +342,20 @@ MOTA_FLOOR_PF = 0.78
 MOTA_FLOOR_KALMAN = 0.78
 
 
-def test_crowd_tracked_end_to_end(crowd20) -> None:
-    path, bounds, corrections, gt = crowd20
+@pytest.fixture(scope="module")
+def crowd20_pf(crowd20) -> tuple[list, list, dict[str, list[float]]]:
+    """The people tracker (PF, background primed by reading ahead: the default) on the crowd; the same call with the
+    same seed gives the same tracks, so the tests that need it share one run."""
+    path, bounds, corrections, _gt = crowd20
     timings: dict[str, list[float]] = {}
     states, events = track_recording(path, params={"lateral_m": 0.2}, area_m=bounds,
                                      clock_corrections_ns=corrections, timings=timings)
+    return states, events, timings
+
+
+def test_crowd_tracked_end_to_end(crowd20, crowd20_pf) -> None:
+    gt = crowd20[3]
+    states, events, timings = crowd20_pf
     m = evaluate_floor(gt, states, 0.5)
     assert m.mota > MOTA_FLOOR_PF, m.mota
     assert m.idf1 > 0.75
@@ -357,7 +365,7 @@ def test_crowd_tracked_end_to_end(crowd20) -> None:
     assert all(s.sensor == "laser" and s.cls == "person" for s in states[:100])
 
 
-def test_primed_background_tracks_people_from_the_first_second(crowd20) -> None:
+def test_primed_background_tracks_people_from_the_first_second(crowd20, crowd20_pf) -> None:
     """Online learning detects nothing for the first n_init = 50 scans (2 s at 25 Hz); reading the recording
     ahead (the default) tracks the people there from the start: most of the truth of the first 2 s is matched."""
     path, bounds, corrections, gt = crowd20
@@ -365,7 +373,7 @@ def test_primed_background_tracks_people_from_the_first_second(crowd20) -> None:
     kw = {"params": {"lateral_m": 0.2}, "area_m": bounds, "clock_corrections_ns": corrections}
     learnt, _ = track_recording(path, background="learn", **kw)
     assert min(s.t_ns for s in learnt) >= t0 + n_init_ns - 50_000_000
-    primed, _ = track_recording(path, **kw)
+    primed = crowd20_pf[0]  # track_recording(path, **kw): read ahead to prime the background, the default
     early = [g for g in gt if g.t_ns < t0 + n_init_ns]
     m = evaluate_floor(early, [s for s in primed if s.t_ns < t0 + n_init_ns + 20_000_000], 0.5)
     # new targets inside the area are confirmed after 10 frames (0.4 s of the 2 s): recall well above half

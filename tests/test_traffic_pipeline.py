@@ -17,8 +17,6 @@ from fusiontrack.eval.vehicles import evaluate_vehicles
 from fusiontrack.fusion.objects import DetectionBuffer
 from fusiontrack.fusion.traffic import TrafficParams, roads_of, track_traffic
 from fusiontrack.io.recording import Recording
-from fusiontrack.sim.scenario import load_scenario
-from fusiontrack.sim.simulator import simulate
 from fusiontrack.types import GroundTruth, Image
 
 AREA = [(-45, -9), (45, -9), (45, 9), (-45, 9)]
@@ -32,17 +30,26 @@ def _after_warm_up(gt, states):
 
 
 @pytest.fixture(scope="module")
-def road(tmp_path_factory):
-    out = tmp_path_factory.mktemp("road") / "road"
-    simulate(load_scenario("road").with_overrides(seconds=SECONDS, seed=0), out)
+def road(simulated):
+    out = simulated("road", seconds=SECONDS, seed=0)
     with Recording(out) as rec:
         gt = [g for g in rec.messages(["/ground_truth"]) if isinstance(g, GroundTruth)]
     return out, gt
 
 
 @pytest.fixture(scope="module")
-def run(road):
-    return track_traffic(road[0], variants=("camera", "laser", "fusion", "fusion_pf"))
+def timed_run(road):
+    """The four variants, serially (no camera workers: every part in this process, so that the call's wall and CPU
+    time measured outside bound its parts); the workers give the same tracks bit for bit (test_traffic_workers.py)
+    and the CLI test runs the pipeline with one."""
+    wall, cpu = time.perf_counter(), time.process_time()
+    res = track_traffic(road[0], params=TrafficParams(workers=0), variants=("camera", "laser", "fusion", "fusion_pf"))
+    return res, time.perf_counter() - wall, time.process_time() - cpu  # the whole call, measured outside
+
+
+@pytest.fixture(scope="module")
+def run(timed_run):
+    return timed_run[0]
 
 
 def test_fused_particle_filter_tracks_the_simulated_vehicles(road, run):
@@ -60,11 +67,9 @@ def test_fused_particle_filter_tracks_the_simulated_vehicles(road, run):
     assert all(run.detections[s] > 0 for s in run.sensors)
 
 
-def test_time_is_measured_per_part_by_the_clock_and_the_cpu(road):
-    wall, cpu = time.perf_counter(), time.process_time()
-    run = track_traffic(road[0], params=TrafficParams(workers=0))  # serial: every part in this process
-    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu  # the whole call, measured outside
-    parts = ("read", "laser_branch", "camera_branch", "fusion_pf", "scene")
+def test_time_is_measured_per_part_by_the_clock_and_the_cpu(timed_run):
+    run, wall, cpu = timed_run  # serial: every part in this process
+    parts = ("read", "laser_branch", "camera_branch", "camera", "laser", "fusion", "fusion_pf", "scene")
     assert all(run.timings_s[p] > 0 and run.cpu_s[p] > 0 for p in parts)
     assert set(run.cpu_s) == set(run.timings_s)
     # the parts are disjoint pieces of the call: together they fit inside its wall and CPU time measured outside

@@ -15,17 +15,14 @@ from fusiontrack.errors import ConfigError
 from fusiontrack.fusion.traffic import TrafficParams, track_traffic
 from fusiontrack.fusion.traffic_workers import CameraWorkers, available, default_workers
 from fusiontrack.io.recording import Recording
-from fusiontrack.sim.scenario import load_scenario
-from fusiontrack.sim.simulator import simulate
 from fusiontrack.types import Image, records_equal
 
 pytestmark = pytest.mark.skipif(not available(), reason="worker processes need the 'fork' start method")
 
 
 @pytest.fixture(scope="module")
-def road(tmp_path_factory):
-    out = tmp_path_factory.mktemp("road_workers") / "road"
-    simulate(load_scenario("road").with_overrides(seconds=8.0, seed=1), out)
+def road(simulated):
+    out = simulated("road", seconds=8.0, seed=1)
     with Recording(out) as rec:
         t_bad = rec.start_ns + int(4e9)
     return out, t_bad

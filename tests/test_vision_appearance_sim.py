@@ -25,8 +25,6 @@ import pytest
 from sklearn.metrics import roc_auc_score
 
 from fusiontrack.io.recording import Recording
-from fusiontrack.sim.scenario import load_scenario
-from fusiontrack.sim.simulator import simulate
 from fusiontrack.vision.appearance import AppearanceBank, assign_identities
 from fusiontrack.vision.patches import extract_features, patch_fraction, sample_patches
 
@@ -44,9 +42,8 @@ def _boxes(gt) -> dict[int, np.ndarray]:
 
 
 @pytest.fixture(scope="module")
-def crossing(tmp_path_factory: pytest.TempPathFactory) -> dict:
-    out: Path = tmp_path_factory.mktemp("appearance") / "crossing"
-    simulate(load_scenario("crossing").with_overrides(seconds=10, seed=0), out)
+def crossing(simulated) -> dict:
+    out: Path = simulated("crossing", seconds=10, seed=0)  # the recording test_vision_people.py's crossing uses
     with Recording(out) as rec:
         images = [m.bgr() for m in rec.messages(["/camera_0/image"])]
         labels = [m.pixels for m in rec.messages(["/camera_0/labels"])]

@@ -18,8 +18,6 @@ from fusiontrack.geometry import PinholeCamera
 from fusiontrack.io.recording import Recording
 from fusiontrack.io.tracks import MotBoxes, read_mot, read_tracks_csv, write_mot
 from fusiontrack.io.video import VideoReader, write_video
-from fusiontrack.sim.scenario import load_scenario
-from fusiontrack.sim.simulator import simulate
 from fusiontrack.tracking.association import hungarian
 from fusiontrack.types import Detection
 from fusiontrack.vision import (
@@ -161,9 +159,8 @@ def test_tracker_rejects_bad_input():
 
 
 @pytest.fixture(scope="module")
-def crossing(tmp_path_factory: pytest.TempPathFactory) -> dict:
-    out = tmp_path_factory.mktemp("people") / "crossing"
-    simulate(load_scenario("crossing").with_overrides(seconds=10, seed=0), out)  # three people meet at ~7.5 s
+def crossing(simulated) -> dict:
+    out = simulated("crossing", seconds=10, seed=0)  # three people meet at ~7.5 s; test_vision_appearance_sim.py's too
     with Recording(out) as rec:
         truth = list(rec.messages(["/ground_truth/camera_0"]))
     states, events, stats = track_camera(out)

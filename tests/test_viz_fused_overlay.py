@@ -20,7 +20,6 @@ from fusiontrack.geometry import TransformTree
 from fusiontrack.io.recording import Recording
 from fusiontrack.io.video import VideoReader
 from fusiontrack.sim.scenario import load_scenario
-from fusiontrack.sim.simulator import simulate
 from fusiontrack.types import CameraInfo, Event, GroundTruth, LaserScan, TrackState
 from fusiontrack.vision.people import camera_from_recording
 from fusiontrack.viz.fused_overlay import (
@@ -36,12 +35,11 @@ WIDEN_PX = 1.0  # slack around the true boxes (pixel rounding of the rendered si
 
 
 @pytest.fixture(scope="module")
-def crowd(tmp_path_factory: pytest.TempPathFactory) -> dict:
+def crowd(simulated) -> dict:
     """5 s of ``crowd`` with few people, camera 3 degrees off its calibration."""
-    scenario = load_scenario("crowd").with_overrides(
-        seconds=5, seed=0, settings={"cameras.0.yaw_bias_deg": YAW_ERROR_DEG, "agents.mean_present": 4})
-    path: Path = tmp_path_factory.mktemp("fused_overlay") / "crowd"
-    simulate(scenario, path)
+    settings = {"cameras.0.yaw_bias_deg": YAW_ERROR_DEG, "agents.mean_present": 4}
+    scenario = load_scenario("crowd").with_overrides(seconds=5, seed=0, settings=settings)
+    path: Path = simulated("crowd", seconds=5, seed=0, settings=settings)
     corrections = {c.name: -round(c.clock_offset_ms * 1e6) for c in scenario.config.lasers}
     with Recording(path) as rec:
         gt = [g for g in rec.messages(["/ground_truth"]) if isinstance(g, GroundTruth)]
