@@ -48,7 +48,7 @@ def _trackeval_reference(dataset_config: dict, tracker: str) -> dict[str, Metric
 def _same_numbers(ours: Metrics, ref: Metrics) -> None:
     expected = ref.to_dict()
     for key, value in ours.to_dict().items():
-        if key != "num_frames":  # TrackEval does not report it
+        if key not in ("num_frames", "max_matches", "idf1_ceiling"):  # TrackEval does not report them
             assert value == pytest.approx(expected[key], abs=1e-12), key
 
 
@@ -287,6 +287,54 @@ def test_two_people_swapping_ids() -> None:
     assert (m.idtp, m.idfn, m.idfp, m.idf1) == (10, 10, 10, pytest.approx(0.5))
 
 
+def test_idf1_ceiling_separates_identity_from_detection_errors() -> None:
+    """The ceiling is IDF1 with perfect identities on the same positions: 1 for a pure swap (IDF1 0.5), and
+    equal to IDF1 when the only errors are detection errors."""
+    xy = _walk()
+    swap = evaluate_floor(_gt(xy), _states(xy, np.array([[10, 20]] * 5 + [[20, 10]] * 5)))
+    assert (swap.idf1, swap.max_matches, swap.idf1_ceiling) == (pytest.approx(0.5), 20, 1.0)
+    # one person tracked well plus a spurious track far away: 10 matches of 10 + 20 detections
+    both = np.concatenate([xy[:, :1], xy[:, :1] + np.array([0.0, 50.0])], axis=1)
+    spurious = evaluate_floor(_gt(xy[:, :1]), _states(both, np.tile([1, 2], (10, 1))))
+    assert spurious.max_matches == 10
+    assert spurious.idf1_ceiling == pytest.approx(2 * 10 / 30)
+    assert spurious.idf1 == pytest.approx(spurious.idf1_ceiling)
+    assert evaluate_floor(_gt(xy), []).idf1_ceiling == 0.0
+
+
+def test_idf1_ceiling_takes_the_largest_matching() -> None:
+    """People A (x = 0) and B (x = 0.8); track 1 at 0.4 is within 0.5 m of both, track 2 at 1.2 of B only. The
+    nearest-first pairing (track 1 - A or B, a tie) can leave one match; the largest matching has two."""
+    gt_xy = np.tile(np.array([[[0.0, 0.0], [0.8, 0.0]]]), (4, 1, 1))
+    tr_xy = np.tile(np.array([[[0.4, 0.0], [1.2, 0.0]]]), (4, 1, 1))
+    m = evaluate_floor(_gt(gt_xy), _states(tr_xy, np.tile([1, 2], (4, 1))), threshold_m=0.5)
+    assert m.max_matches == 8
+    assert m.idf1_ceiling == 1.0
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_idf1_never_exceeds_its_ceiling(seed: int) -> None:
+    """Random crowds with noisy, swapping, missing and spurious tracks: IDTP <= max_matches (hence IDF1 <= the
+    ceiling), and CLEAR's matches are a matching too (TP <= max_matches)."""
+    rng = np.random.default_rng(seed)
+    n_t, n = 40, 6
+    gt_xy = np.cumsum(rng.normal(0, 0.15, (n_t, n, 2)), axis=0) + rng.uniform(0, 3, (1, n, 2))
+    tr_xy = gt_xy + rng.normal(0, 0.3, gt_xy.shape)
+    ids = np.tile(np.arange(n), (n_t, 1))
+    for k in rng.integers(1, n_t, 6):  # identity swaps between random pairs from frame k on
+        i, j = rng.choice(n, 2, replace=False)
+        ids[k:, [i, j]] = ids[k:, [j, i]]
+    ids[rng.random(ids.shape) < 0.1] = -1  # missed states
+    extra = rng.uniform(0, 3, (n_t, 2, 2))  # two spurious tracks
+    tr_xy = np.concatenate([tr_xy, extra], axis=1)
+    ids = np.concatenate([ids, np.tile([100, 101], (n_t, 1))], axis=1)
+    m = evaluate_floor(_gt(gt_xy), _states(tr_xy, ids))
+    assert m.idtp <= m.max_matches
+    assert m.tp <= m.max_matches
+    assert m.idf1 <= m.idf1_ceiling + 1e-12
+    assert 0.0 < m.idf1_ceiling < 1.0
+
+
 def test_constant_offset_inside_threshold() -> None:
     """0.3 m offset, threshold 0.5 m: all matched; MOTP = 1 - 0.3 / (2 * 0.5) = 0.7."""
     xy = _walk()
@@ -414,6 +462,8 @@ def test_combining_floor_sequences_sums_counts() -> None:
     assert c.idf1 == pytest.approx(2 * (a.idtp + b.idtp) / (2 * (a.idtp + b.idtp) + a.idfp + a.idfn + b.idfn))
     assert c.distance_scale_m == 1.0
     assert not c.id_map
+    assert c.max_matches == a.max_matches + b.max_matches == 30
+    assert c.idf1_ceiling == pytest.approx(2 * 30 / (c.num_gt_dets + c.num_tracker_dets))
 
 
 def test_bad_inputs_raise_named_errors() -> None:

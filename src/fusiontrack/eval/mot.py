@@ -144,6 +144,9 @@ class Metrics:
         Ground-truth identities tracked for > 80 %, 20-80 %, < 20 % of their frames.
     idtp, idfp, idfn : int
         Identity (IDF1) true positives, false positives, false negatives.
+    max_matches : int
+        Per timestep, the most ground-truth/track pairs that can be matched one-to-one within the match
+        threshold, summed over the timesteps. ``-1`` when not computed.
     num_gt_ids, num_tracker_ids, num_gt_dets, num_tracker_dets, num_frames : int
         What was evaluated (after class filtering and preprocessing).
     distance_scale_m : float or None
@@ -190,9 +193,26 @@ class Metrics:
     num_gt_dets: int
     num_tracker_dets: int
     num_frames: int
+    max_matches: int = -1
     distance_scale_m: float | None = None
     id_map: Mapping[int, int] = field(default_factory=dict, compare=False)
     raw: Mapping[str, Mapping[str, Any]] = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def idf1_ceiling(self) -> float:
+        """The highest IDF1 any assignment of identities to these detections could reach: ``2 * max_matches /
+        (num_gt_dets + num_tracker_dets)``.
+
+        IDF1 is ``2 * IDTP / (num_gt_dets + num_tracker_dets)``, and the IDTP pairs of one timestep are a one-to-one
+        matching within the threshold, so ``IDTP <= max_matches``. The ceiling is what the same track positions
+        would score if every track kept one identity for good (association perfect); the gap to IDF1 is the
+        identity errors' share, the gap to 1 the detection errors' (misses, false tracks, localisation beyond the
+        threshold). 1 with nothing to evaluate; NaN when ``max_matches`` was not computed.
+        """
+        if self.max_matches < 0:
+            return float("nan")
+        n = self.num_gt_dets + self.num_tracker_dets
+        return 2.0 * self.max_matches / n if n else 1.0
 
     @property
     def motp_m(self) -> float | None:
@@ -205,11 +225,13 @@ class Metrics:
         """The numbers as a flat dict (JSON-ready), plus ``motp_m``; ``id_map`` and ``raw`` are left out."""
         out: dict[str, float | int | None] = {name: getattr(self, name) for name in _NUMBER_FIELDS}
         out["motp_m"] = self.motp_m
+        out["idf1_ceiling"] = self.idf1_ceiling
         return out
 
     @classmethod
     def from_trackeval(cls, raw: Mapping[str, Mapping[str, Any]], *, num_frames: int,
-                       distance_scale_m: float | None = None, id_map: Mapping[int, int] | None = None) -> Metrics:
+                       distance_scale_m: float | None = None, id_map: Mapping[int, int] | None = None,
+                       max_matches: int = -1) -> Metrics:
         """Build from TrackEval result dicts keyed by metric class name (CLEAR, Identity, HOTA, Count)."""
         clear, ident, hota, count = raw["CLEAR"], raw["Identity"], raw["HOTA"], raw["Count"]
 
@@ -228,7 +250,8 @@ class Metrics:
             idtp=int(ident["IDTP"]), idfp=int(ident["IDFP"]), idfn=int(ident["IDFN"]),
             num_gt_ids=int(count["GT_IDs"]), num_tracker_ids=int(count["IDs"]),
             num_gt_dets=int(count["GT_Dets"]), num_tracker_dets=int(count["Dets"]), num_frames=int(num_frames),
-            distance_scale_m=distance_scale_m, id_map=MappingProxyType(dict(id_map or {})),
+            max_matches=int(max_matches), distance_scale_m=distance_scale_m,
+            id_map=MappingProxyType(dict(id_map or {})),
             raw=MappingProxyType({k: MappingProxyType(dict(v)) for k, v in raw.items()}),
         )
 
@@ -294,6 +317,21 @@ def _identity_map(gt: list[np.ndarray], tr: list[np.ndarray], sim: list[np.ndarr
     return {int(tr_unique[c]): int(gt_unique[r]) for r, c in zip(rows[keep], cols[keep], strict=True)}
 
 
+def _max_matches(sim: list[np.ndarray], threshold: float) -> int:
+    """Summed over timesteps, the largest one-to-one matching of pairs with similarity >= ``threshold``."""
+    total = 0
+    for s in sim:
+        ok = s >= threshold
+        if not ok.any():
+            continue
+        if (np.count_nonzero(ok, axis=0) <= 1).all() and (np.count_nonzero(ok, axis=1) <= 1).all():
+            total += int(np.count_nonzero(ok))  # no contention: every candidate pair is its own match
+            continue
+        rows, cols = linear_sum_assignment(ok, maximize=True)
+        total += int(np.count_nonzero(ok[rows, cols]))
+    return total
+
+
 def _evaluate(seq: _Sequence, threshold: float = _MATCH_SIMILARITY, distance_scale_m: float | None = None) -> Metrics:
     gt, gt_unique = _relabel(seq.gt_ids, seq.name, "ground-truth")
     tr, tr_unique = _relabel(seq.tracker_ids, seq.name, "tracker")
@@ -310,7 +348,8 @@ def _evaluate(seq: _Sequence, threshold: float = _MATCH_SIMILARITY, distance_sca
     raw = {type(m).__name__: getattr(type(m).eval_sequence, "__wrapped__", type(m).eval_sequence)(m, data)
            for m in _trackeval_metrics(threshold)}
     id_map = _identity_map(gt, tr, sim, gt_unique, tr_unique, threshold)
-    return Metrics.from_trackeval(raw, num_frames=len(gt), distance_scale_m=distance_scale_m, id_map=id_map)
+    return Metrics.from_trackeval(raw, num_frames=len(gt), distance_scale_m=distance_scale_m, id_map=id_map,
+                                  max_matches=_max_matches(sim, threshold))
 
 
 def combine_metrics(results: Iterable[Metrics] | Mapping[str, Metrics]) -> Metrics:
@@ -336,8 +375,10 @@ def combine_metrics(results: Iterable[Metrics] | Mapping[str, Metrics]) -> Metri
     raw = {type(m).__name__: m.combine_sequences({i: dict(r.raw[type(m).__name__]) for i, r in enumerate(items)})
            for m in metrics}
     scales = {m.distance_scale_m for m in items}
+    known = all(m.max_matches >= 0 for m in items)
     return Metrics.from_trackeval(raw, num_frames=sum(m.num_frames for m in items),
-                                  distance_scale_m=scales.pop() if len(scales) == 1 else None)
+                                  distance_scale_m=scales.pop() if len(scales) == 1 else None,
+                                  max_matches=sum(m.max_matches for m in items) if known else -1)
 
 
 # --------------------------------------------------------------------------------------------------
