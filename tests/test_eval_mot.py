@@ -513,4 +513,4 @@ def test_metrics_table_and_dict() -> None:
     console = Console(width=200, record=True)
     console.print(metrics_table({"walk": m}, title="floor"))
     text = console.export_text()
-    assert all(cell in text for cell in ("walk", "100.0", "0.300", "MOTP m"))
+    assert all(cell in text for cell in ("walk", "100.0", "0.300", "MOTP m", "IDF1max"))

@@ -764,7 +764,9 @@ def evaluate_mot_files(gt_path: str | Path, res_path: str | Path, *, preprocess:
 
 _TABLE_COLUMNS = (  # (header, field, is a fraction shown in percent)
     ("HOTA", "hota", True), ("DetA", "deta", True), ("AssA", "assa", True), ("LocA", "loca", True),
-    ("MOTA", "mota", True), ("MOTP", "motp", True), ("IDF1", "idf1", True), ("IDP", "idp", True),
+    ("MOTA", "mota", True), ("MOTP", "motp", True), ("IDF1", "idf1", True),
+    ("IDF1max", "idf1_ceiling", True),  # IDF1 with perfect identities: the rest of the gap is detection errors
+    ("IDP", "idp", True),
     ("IDR", "idr", True), ("Rcll", "recall", True), ("Prcn", "precision", True), ("IDSW", "id_switches", False),
     ("Frag", "fragmentations", False), ("FP", "fp", False), ("FN", "fn", False), ("GT", "num_gt_ids", False),
     ("MT", "mostly_tracked", False), ("PT", "partially_tracked", False), ("ML", "mostly_lost", False),
@@ -775,6 +777,7 @@ def metrics_table(results: Mapping[str, Metrics], *, title: str | None = None) -
     """A rich table, one row per entry of ``results``, fractions in percent with one decimal (MOTChallenge style).
 
     Floor-plane results (all with a distance scale) get a ``MOTP m`` column: the mean matched distance.
+    ``IDF1max`` is :attr:`Metrics.idf1_ceiling`.
     """
     from rich.table import Table
 
