@@ -18,6 +18,7 @@ __all__ = [
     "centroid_log_likelihood",
     "laser_likelihood",
     "laser_log_likelihood",
+    "laser_log_likelihood_cols",
 ]
 
 
@@ -65,10 +66,23 @@ def laser_log_likelihood(state: np.ndarray, feet_obs: np.ndarray, inter_feet: np
         ``<= 0``; exactly 0 on rows without a detection.
     """
     x = np.asarray(state, dtype=np.float64)
-    f = np.asarray(feet_obs, dtype=np.float64)
-    n_t = x.shape[0]
     if x.ndim != 3 or x.shape[-1] != STATE_DIM:
         raise ValueError(f"state: expected shape (n_t, n_p, {STATE_DIM}), got {x.shape}")
+    cols = np.ascontiguousarray(x.reshape(-1, STATE_DIM).T).reshape(STATE_DIM, *x.shape[:2])  # (8, n_t, n_p)
+    return laser_log_likelihood_cols(cols, feet_obs, inter_feet, one_foot, sigma_f, sigma_w, sigma_f_one=sigma_f_one,
+                                     kappa=kappa, lateral_m=lateral_m)
+
+
+def laser_log_likelihood_cols(cols: np.ndarray, feet_obs: np.ndarray, inter_feet: np.ndarray, one_foot: np.ndarray,
+                              sigma_f: float = 0.10, sigma_w: float = 0.10, *, sigma_f_one: float = 0.15,
+                              kappa: float = 1.0 / np.pi, lateral_m: float = 0.0) -> np.ndarray:
+    """:func:`laser_log_likelihood` of particles in the column layout ``(8, n_t, n_p)`` (``cols[c]`` is column
+    ``c`` of every particle, as the laser tracker keeps them): the same values, without a transpose per call.
+    """
+    f = np.asarray(feet_obs, dtype=np.float64)
+    if cols.ndim != 3 or cols.shape[0] != STATE_DIM:
+        raise ValueError(f"cols: expected shape ({STATE_DIM}, n_t, n_p), got {cols.shape}")
+    n_t = cols.shape[1]
     if f.shape != (n_t, 2, 2):
         raise ValueError(f"feet_obs: expected shape ({n_t}, 2, 2), got {f.shape}")
     sd = _vector(inter_feet, np.float64, n_t)
@@ -80,7 +94,6 @@ def laser_log_likelihood(state: np.ndarray, feet_obs: np.ndarray, inter_feet: np
         sd = np.where(missing, 0.0, sd)
     any_one = np.count_nonzero(one) > 0
 
-    cols = np.ascontiguousarray(x.reshape(-1, STATE_DIM).T).reshape(STATE_DIM, n_t, x.shape[1])  # (8, n_t, n_p)
     # The four squared foot-to-barycentre distances in one pass, each |p - f|² = dx² + dy² as written out:
     # rows (l-f1, l-f2, r-f1, r-f2) x (x, y)
     d = cols[_FOOT_ROWS]  # (8, n_t, n_p): lx ly lx ly rx ry rx ry

@@ -6,8 +6,8 @@
 per confirmed live track; the situation events of the step are in :attr:`LaserPeopleTracker.events`.
 The step follows ARCHITECTURE.md's "Tracker step" (ALGORITHMS.md sections in brackets):
 
-1. **predict** — all walking targets at once, ``(n_targets, n_particles, 8)`` particles: the two-feet
-   walking model, or the random walk for people standing still [B8]; merged targets by a
+1. **predict** — all walking targets at once, ``(8, n_targets, n_particles)`` particles (column layout): the
+   two-feet walking model, or the random walk for people standing still [B8]; merged targets by a
    constant-velocity Kalman filter on their segment centre [B17, X5];
 2. **gate** — ``D_kj`` between every predicted centre (particle mean of the feet midpoint) and every
    detection centre, association states ``c``/``r`` [B6];
@@ -89,8 +89,8 @@ from ..errors import ConfigError
 from ..types import Detection, Event, ObjectClass, Situation, TrackState
 from . import kalman
 from .association import association_states, gate_distances, hungarian
-from .likelihood import laser_log_likelihood
-from .pf import resample_where, reweight, standard_normal
+from .likelihood import laser_log_likelihood_cols
+from .pf import resample_where_cols, reweight, standard_normal
 from .situations import SITUATION_OF_LABEL, TargetLabel, classify_situations, on_edge
 from .walking import (
     PERIOD,
@@ -100,7 +100,7 @@ from .walking import (
     StandingNoise,
     WalkingNoise,
     init_walking,
-    predict_people,
+    predict_people_cols,
     update_standing,
 )
 
@@ -782,7 +782,7 @@ class LaserPeopleTracker:
         Steps ignored because their time was not after the previous step's (out of order).
     """
 
-    _WALKING_ARRAYS = ("_x", "_w", "_id", "_seen", "_pos", "_lag", "_vel", "_slow", "_standing", "_born",
+    _WALKING_ARRAYS = ("_w", "_id", "_seen", "_pos", "_lag", "_vel", "_slow", "_standing", "_born",
                        "_born_edge")
 
     def __init__(self, params: TrackerParams | Mapping[str, Any] | None = None, *, area_m: Any = None,
@@ -801,8 +801,9 @@ class LaserPeopleTracker:
         self.events: list[Event] = []
         self.dropped_steps = 0
         n_p = p.n_particles
-        # walking targets, one row each
-        self._x = np.zeros((0, n_p, 8))
+        # walking targets, one row each; the particles in the column layout (8, n_targets, n_particles):
+        # self._x[c] is column c (walking.py) of every particle
+        self._x = np.zeros((8, 0, n_p))
         self._w = np.zeros((0, n_p))
         self._id = np.zeros(0, np.int64)
         self._seen = np.zeros(0, np.int64)  # time of the last detection
@@ -922,7 +923,7 @@ class LaserPeopleTracker:
         if dt <= 0:
             return
         if self._id.size:
-            self._x = predict_people(self._x, self._standing, dt, self.rng, p.walking_noise, p.standing_noise)
+            self._x = predict_people_cols(self._x, self._standing, dt, self.rng, p.walking_noise, p.standing_noise)
         if self._merged:
             fq = _CV_MATRICES.get((dt, p.merged_q))
             if fq is None:  # the same few step lengths over and over: cache them
@@ -936,15 +937,24 @@ class LaserPeopleTracker:
                 m.predict(dt, p.member_tau_s)
 
     def _walking_centres(self, mid: np.ndarray | None = None) -> np.ndarray:
-        """Particle mean of the feet midpoint of every walking target; ``mid`` (``x[..., 0:2] + x[..., 2:4]``,
-        the feet sums of the current particles) when the caller already has it."""
+        """Particle mean of the feet midpoint of every walking target, ``(n_t, 2)``; ``mid`` (``(2, n_t, n_p)``,
+        the feet sums of the current particles, :meth:`_feet_sums`) when the caller already has it.
+
+        ``0.5 Σ_p w_tp mid_tp``, summed particle after particle: the products go to a ``(n_p, n_t, 2)`` buffer
+        whose reduction over its outer axis adds them in order (the sums ``einsum("tp,tpk->tk")`` makes of the
+        row layout, bit for bit; a reduction along a contiguous axis would sum pairwise).
+        """
         if mid is None:
             mid = self._feet_sums()
-        return 0.5 * np.einsum("tp,tpk->tk", self._w, mid)
+        w = self._w
+        prod = np.empty((w.shape[1], w.shape[0], 2))
+        np.multiply(w.T[:, :, None], mid.transpose(2, 1, 0), out=prod)
+        return 0.5 * np.add.reduce(prod, axis=0)
 
     def _feet_sums(self) -> np.ndarray:
+        """``left + right`` foot position of every particle, ``(2, n_t, n_p)``."""
         x = self._x
-        return x[..., 0:2] + x[..., 2:4]
+        return x[0:2] + x[2:4]
 
     def _update(self, t_ns: int, dt: float, det: DetectionArrays) -> list[TrackState]:
         p = self.params
@@ -1002,19 +1012,20 @@ class LaserPeopleTracker:
             one = np.zeros(n_w, bool)
             j = aw[upd]
             feet[upd], sd[upd], one[upd] = det.feet[j], det.inter_feet[j], det.one_foot[j]
-            ll = laser_log_likelihood(self._x, feet, sd, one, p.sigma_f_m, p.sigma_w_m, sigma_f_one=p.sigma_f_one_m,
-                                      kappa=p.kappa, lateral_m=p.lateral_m)
+            ll = laser_log_likelihood_cols(self._x, feet, sd, one, p.sigma_f_m, p.sigma_w_m,
+                                           sigma_f_one=p.sigma_f_one_m, kappa=p.kappa, lateral_m=p.lateral_m)
             if self._extra_ll is not None:  # fusion hook (B16): the camera's score map for correlated targets
                 corr = (upd & (labels[:n_w] == _CORRELATED)).nonzero()[0]
                 if corr.size:
-                    xc = self._x[corr]
-                    extra = self._extra_ll(t_ns, self._id[corr].copy(), 0.5 * (xc[..., 0:2] + xc[..., 2:4]))
+                    xc = self._x[:, corr]
+                    mid_c = np.ascontiguousarray(np.moveaxis(0.5 * (xc[0:2] + xc[2:4]), 0, -1))  # (n, n_p, 2)
+                    extra = self._extra_ll(t_ns, self._id[corr].copy(), mid_c)
                     if extra is not None:
                         ll[corr] = ll[corr] + np.asarray(extra, np.float64)
             self._w, _ = reweight(self._w, ll)
             self._seen[upd] = t_ns
             pos = self._walking_centres(mid)
-            self._x, self._w = resample_where(self._x, self._w, upd, self.rng)
+            self._x, self._w = resample_where_cols(self._x, self._w, upd, self.rng)
         else:
             pos = cw
         self._track_velocity(pos, dt)
@@ -1143,6 +1154,7 @@ class LaserPeopleTracker:
         # ---- apply the structure changes
         if np.count_nonzero(gone_w):
             keep = ~gone_w
+            self._x = np.ascontiguousarray(self._x[:, keep])
             for name in self._WALKING_ARRAYS:
                 setattr(self, name, getattr(self, name)[keep])
         if np.count_nonzero(gone_m) or new_merged:
@@ -1185,18 +1197,23 @@ class LaserPeopleTracker:
         pairs, _, _ = hungarian(cost)
         for a, b in pairs:
             row, j = int(lost[a]), int(free[b])
-            x, w = self._x[row], self._w[row]
+            x, w = self._particles(row), self._w[row]
             v = det.centres[j] - self._pos[row]
             heading = float(np.arctan2(v[1], v[0])) if np.hypot(*v) >= 0.1 else float(
                 np.arctan2(w @ np.sin(x[:, PSI]), w @ np.cos(x[:, PSI])))
             spec = self._new_walker(int(self._id[row]), det, j, self._vel[row], heading, t_ns,
                                     period_s=float(w @ x[:, PERIOD]), stride_m=float(w @ x[:, STRIDE]),
                                     standing=bool(self._standing[row]))
-            self._x[row] = spec["x"]
+            self._x[:, row] = spec["x"].T
             self._w[row] = 1.0 / p.n_particles
             assigned[row] = j
             claimed[j] = True
         return len(pairs) > 0
+
+    def _particles(self, row: int) -> np.ndarray:
+        """The particles of walking target ``row`` as rows, ``(n_p, 8)`` C-contiguous (the array the row layout
+        held: reductions over it, e.g. ``w @ x[:, PERIOD]``, give the values they gave)."""
+        return np.ascontiguousarray(self._x[:, row].T)
 
     def _merge(self, group: np.ndarray, j: int, det: DetectionArrays, t_ns: int, gone_w: np.ndarray,
                gone_m: np.ndarray) -> _Merged:
@@ -1206,7 +1223,7 @@ class LaserPeopleTracker:
         pos, vel, info, parts = [], [], [], []
         for row in group:
             if row < n_w:
-                x, w = self._x[row], self._w[row]
+                x, w = self._particles(row), self._w[row]
                 heading = float(np.arctan2(w @ np.sin(x[:, PSI]), w @ np.cos(x[:, PSI])))
                 info.append(_MemberInfo(int(self._id[row]), float(w @ x[:, PERIOD]), float(w @ x[:, STRIDE]),
                                         heading, bool(self._standing[row]), int(self._born[row]),
@@ -1366,7 +1383,7 @@ class LaserPeopleTracker:
         started = was & ~self._standing
         if np.count_nonzero(started):  # walks again: head where the track goes
             psi = np.arctan2(self._vel[started, 1], self._vel[started, 0])
-            self._x[started, :, PSI] = psi[:, None] + p.init_heading_sigma_rad * self.rng.standard_normal(
+            self._x[PSI, started, :] = psi[:, None] + p.init_heading_sigma_rad * self.rng.standard_normal(
                 (int(started.sum()), n_p))
         if p.reseed_fraction > 0 and dt > 0:
             rows = (~self._standing & (speed > p.resume_speed_mps)).nonzero()[0]
@@ -1378,9 +1395,9 @@ class LaserPeopleTracker:
                 psi = np.arctan2(vel[:, 1], vel[:, 0])
                 psi = psi[:, None] + p.init_heading_sigma_rad * standard_normal(self.rng, (rows.size, k))
                 if rows.size == self._id.size:  # a basic slice: no fancy-index scatter
-                    self._x[:, start:start + k, PSI] = psi
+                    self._x[PSI, :, start:start + k] = psi
                 else:
-                    self._x[rows, start:start + k, PSI] = psi
+                    self._x[PSI, rows, start:start + k] = psi
 
     def _new_walker(self, tid: int, det: DetectionArrays, j: int, v0: np.ndarray, heading: float, t_ns: int, *,
                     period_s: float = 1.1, stride_m: float | None = None, standing: bool | None = None,
@@ -1401,7 +1418,7 @@ class LaserPeopleTracker:
     def _add_walking(self, *, track_id: int, x: np.ndarray, pos: np.ndarray, vel: np.ndarray, seen: int,
                      standing: bool, born: int, born_edge: bool) -> None:
         n_p = self.params.n_particles
-        self._x = np.concatenate([self._x, x[None]])
+        self._x = np.concatenate([self._x, x.T[:, None, :]], axis=1)
         self._w = np.concatenate([self._w, np.full((1, n_p), 1.0 / n_p)])
         self._id = np.append(self._id, track_id)
         self._seen = np.append(self._seen, seen)
