@@ -75,9 +75,13 @@ def laser_log_likelihood(state: np.ndarray, feet_obs: np.ndarray, inter_feet: np
 
 def laser_log_likelihood_cols(cols: np.ndarray, feet_obs: np.ndarray, inter_feet: np.ndarray, one_foot: np.ndarray,
                               sigma_f: float = 0.10, sigma_w: float = 0.10, *, sigma_f_one: float = 0.15,
-                              kappa: float = 1.0 / np.pi, lateral_m: float = 0.0) -> np.ndarray:
+                              kappa: float = 1.0 / np.pi, lateral_m: float = 0.0,
+                              missing: np.ndarray | None = None) -> np.ndarray:
     """:func:`laser_log_likelihood` of particles in the column layout ``(8, n_t, n_p)`` (``cols[c]`` is column
     ``c`` of every particle, as the laser tracker keeps them): the same values, without a transpose per call.
+
+    ``missing (n_t,) bool``, optional: the rows without a detection when the caller knows them, given as finite
+    values (e.g. zeros: they are not used, the rows' log-likelihood is 0); default: the rows holding ``NaN``.
     """
     f = np.asarray(feet_obs, dtype=np.float64)
     if cols.ndim != 3 or cols.shape[0] != STATE_DIM:
@@ -87,11 +91,14 @@ def laser_log_likelihood_cols(cols: np.ndarray, feet_obs: np.ndarray, inter_feet
         raise ValueError(f"feet_obs: expected shape ({n_t}, 2, 2), got {f.shape}")
     sd = _vector(inter_feet, np.float64, n_t)
     one = _vector(one_foot, bool, n_t)
-    missing = np.isnan(f).any(axis=(1, 2)) | (np.isnan(sd) & ~one)
-    any_missing = np.count_nonzero(missing) > 0
-    if any_missing:
-        f = np.where(missing[:, None, None], 0.0, f)
-        sd = np.where(missing, 0.0, sd)
+    if missing is None:
+        missing = np.isnan(f).any(axis=(1, 2)) | (np.isnan(sd) & ~one)
+        any_missing = np.count_nonzero(missing) > 0
+        if any_missing:
+            f = np.where(missing[:, None, None], 0.0, f)
+            sd = np.where(missing, 0.0, sd)
+    else:
+        any_missing = np.count_nonzero(missing) > 0
     any_one = np.count_nonzero(one) > 0
 
     # The four squared foot-to-barycentre distances in one pass, each |p - f|² = dx² + dy² as written out:

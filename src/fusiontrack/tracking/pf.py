@@ -153,8 +153,12 @@ def reweight(weights: np.ndarray, log_likelihood: np.ndarray) -> tuple[np.ndarra
     -------
     weights, degenerate : see :func:`normalise_log_weights`.
     """
-    with np.errstate(divide="ignore"):
-        lw = np.log(_check_weights(weights))
+    w = _check_weights(weights)
+    if np.count_nonzero(w) == w.size:  # the usual case: no zero weight, no log(0) to silence (errstate costs µs)
+        lw = np.log(w)
+    else:
+        with np.errstate(divide="ignore"):
+            lw = np.log(w)
     if lw.shape == np.shape(log_likelihood):
         lw += log_likelihood  # lw is ours: add in place (the same sums)
     else:

@@ -101,7 +101,6 @@ from .walking import (
     WalkingNoise,
     init_walking,
     predict_people_cols,
-    update_standing,
 )
 
 __all__ = [
@@ -124,6 +123,19 @@ _DISAPPEARING_S, _NONCORRELATED_S = str(Situation.DISAPPEARING), str(Situation.N
 _NONCORRELATED, _CORRELATED = int(TargetLabel.NONCORRELATED), int(TargetLabel.CORRELATED)
 _MERGING, _MERGED, _SPLITTING = int(TargetLabel.MERGING), int(TargetLabel.MERGED), int(TargetLabel.SPLITTING)
 _COASTING, _DISAPPEARING = int(TargetLabel.COASTING), int(TargetLabel.DISAPPEARING)
+_NO_INDEX = np.zeros(0, np.int64)
+_NO_INDEX.setflags(write=False)
+_WANTS_DETECTION = np.zeros(256, bool)  # by target label: the labels that take their nearest detection
+_WANTS_DETECTION[[_NONCORRELATED, _CORRELATED, _MERGED]] = True
+
+
+def _starts(sizes: list[int]) -> list[int]:
+    """Start index of each block of the given sizes (``np.minimum.reduceat``'s indices)."""
+    out, k = [], 0
+    for n in sizes:
+        out.append(k)
+        k += n
+    return out
 
 
 def _all(a: np.ndarray) -> bool:
@@ -402,13 +414,15 @@ def detection_arrays(detections: Sequence[Detection]) -> DetectionArrays:
                         dtype=np.float64)
     inter = np.array(inter_l, dtype=np.float64)
     one = np.array(one_l, dtype=bool)
-    missing = np.isnan(inter) if all_feet else np.isnan(inter) & has_feet
-    if np.count_nonzero(missing):
-        inter[missing] = np.hypot(*(feet[missing, 0] - feet[missing, 1]).T)
-    one |= ~np.isfinite(inter) if all_feet else ~has_feet | ~np.isfinite(inter)
+    if not (all_feet and math.isfinite(np.add.reduce(inter))):  # (a finite sum: every value finite, the usual case)
+        missing = np.isnan(inter) if all_feet else np.isnan(inter) & has_feet
+        if np.count_nonzero(missing):
+            inter[missing] = np.hypot(*(feet[missing, 0] - feet[missing, 1]).T)
+        one |= ~np.isfinite(inter) if all_feet else ~has_feet | ~np.isfinite(inter)
     if np.count_nonzero(one):
         inter = np.where(one, 0.0, inter)
-    if _all(np.isfinite(centres)) and _all(np.isfinite(feet)):  # the usual case: every row ok
+    if (math.isfinite(np.add.reduce(centres, axis=None)) and math.isfinite(np.add.reduce(feet, axis=None))) or (
+            _all(np.isfinite(centres)) and _all(np.isfinite(feet))):  # the usual case: every row ok
         return DetectionArrays(centres, feet, inter, one, tuple(points))
     ok = np.isfinite(centres).all(axis=1) & np.isfinite(feet).all(axis=(1, 2))
     if ok.all():
@@ -584,14 +598,16 @@ class _Merged:
         res = res * np.minimum(1.0, max_step_m / np.maximum(norm, 1e-12))
         pos = pred + alpha * res
         if m >= 2 and min_gap_m > 0:
+            pl = pos.tolist()  # (the differences of Python floats: the values of pos[b] - pos[a])
             for a, b in itertools.combinations(range(m), 2):
-                d = pos[b] - pos[a]
-                n = float(np.hypot(d[0], d[1]))
+                n = float(np.hypot(pl[b][0] - pl[a][0], pl[b][1] - pl[a][1]))
                 if n < min_gap_m:
+                    d = pos[b] - pos[a]
                     u = d / n if n > 1e-9 else np.array([1.0, 0.0])
                     push = 0.5 * (min_gap_m - n) * u
                     pos[a] -= push
                     pos[b] += push
+                    pl = pos.tolist()
             res = pos - pred
         self.pos = pos
         if dt > 0:
@@ -965,22 +981,27 @@ class LaserPeopleTracker:
         cw = self._walking_centres(mid)
         if n_m:
             centres = np.concatenate([cw, np.array([m.x[0:2] for m in merged])])
-            D = np.concatenate([gate_distances(cw, det.centres, p.bandwidth_m)]
-                               + [gate_distances(m.pos, det.centres, p.bandwidth_m).min(axis=0, keepdims=True)
-                                  for m in merged])  # a merged target gates with each of its members
+            # a merged target gates with each of its members: one matrix for every walking target and member,
+            # then each merged target's rows reduced to their minimum (the same values as one matrix each)
+            sizes = [m.pos.shape[0] for m in merged]
+            G = gate_distances(np.concatenate([cw] + [m.pos for m in merged]), det.centres, p.bandwidth_m)
+            D = np.concatenate([G[:n_w], np.minimum.reduceat(G[n_w:], _starts(sizes), axis=0)]) if n_d else G[:n_t]
         else:
             centres = cw
             D = gate_distances(cw, det.centres, p.bandwidth_m)
         c, r, found = association_states(D, p.gate)
-        edge_t = self._edge(centres)
-        edge_d = self._edge(det.centres)
+        if n_d:  # one edge test for targets and detections
+            edge = self._edge(np.concatenate([centres, det.centres]))
+            edge_t, edge_d = edge[:n_t], edge[n_t:]
+        else:
+            edge_t, edge_d = self._edge(centres), self._edge(det.centres)
         merged_mask = np.zeros(n_t, bool)
         merged_mask[n_w:] = True
         sf = classify_situations(c, r, found, merged_mask, edge_t, edge_d, D)
         labels = sf.target_labels
 
         # ---- one detection per target (B10 nearest neighbour, one-to-one by Hungarian when contested)
-        want = (labels == _NONCORRELATED) | (labels == _CORRELATED) | (labels == _MERGED)
+        want = _WANTS_DETECTION[labels]  # NONCORRELATED, CORRELATED or MERGED
         assigned = np.full(n_t, -1, np.int64)
         rows = want.nonzero()[0]
         if rows.size and n_d:
@@ -1006,14 +1027,20 @@ class LaserPeopleTracker:
         # ---- walking targets: B9 likelihood with the assigned detection, resample (X1, B10)
         aw = assigned[:n_w]
         upd = aw >= 0
-        if np.count_nonzero(upd):
-            feet = np.full((n_w, 2, 2), np.nan)
-            sd = np.zeros(n_w)
-            one = np.zeros(n_w, bool)
-            j = aw[upd]
-            feet[upd], sd[upd], one[upd] = det.feet[j], det.inter_feet[j], det.one_foot[j]
+        n_upd = np.count_nonzero(upd)
+        if n_upd:
+            if n_upd == n_w:  # every walking target has a detection
+                feet, sd, one, missing = det.feet[aw], det.inter_feet[aw], det.one_foot[aw], np.zeros(n_w, bool)
+            else:  # the others' rows: zeros, flagged missing (log-likelihood 0)
+                feet = np.zeros((n_w, 2, 2))
+                sd = np.zeros(n_w)
+                one = np.zeros(n_w, bool)
+                j = aw[upd]
+                feet[upd], sd[upd], one[upd] = det.feet[j], det.inter_feet[j], det.one_foot[j]
+                missing = ~upd
             ll = laser_log_likelihood_cols(self._x, feet, sd, one, p.sigma_f_m, p.sigma_w_m,
-                                           sigma_f_one=p.sigma_f_one_m, kappa=p.kappa, lateral_m=p.lateral_m)
+                                           sigma_f_one=p.sigma_f_one_m, kappa=p.kappa, lateral_m=p.lateral_m,
+                                           missing=missing)
             if self._extra_ll is not None:  # fusion hook (B16): the camera's score map for correlated targets
                 corr = (upd & (labels[:n_w] == _CORRELATED)).nonzero()[0]
                 if corr.size:
@@ -1048,12 +1075,14 @@ class LaserPeopleTracker:
                     split_now.append(i)
                     claimed[js] = True
             else:
-                js = assigned[row:row + 1][assigned[row:row + 1] >= 0]
+                a = int(assigned[row])
+                js = np.array([a], np.int64) if a >= 0 else _NO_INDEX
             if js.size == 0:
                 continue
+            js_l = js.tolist()
             # one detection: its centre (the mean of one row is that row); else the mean, as np.mean sums / n
-            z = det.centres[js[0]].copy() if js.size == 1 else det.centres[js].mean(axis=0)
-            pts = [det.points[j] for j in js.tolist()] if det.points else []
+            z = det.centres[js_l[0]].copy() if len(js_l) == 1 else det.centres[js].mean(axis=0)
+            pts = [det.points[j] for j in js_l] if det.points else []
             if pts and all(q is not None for q in pts):  # (one segment: its own points, read only)
                 points = pts[0] if len(pts) == 1 else np.concatenate(pts)
             else:
@@ -1377,8 +1406,9 @@ class LaserPeopleTracker:
             self._vel = (pos - self._lag) / lag_s
         speed = np.hypot(self._vel[:, 0], self._vel[:, 1])
         was = self._standing
-        self._slow, self._standing = update_standing(speed, self._slow, self._standing, p.standing_speed_mps,
-                                                     p.standing_frames, p.resume_speed_mps)
+        # update_standing(speed, self._slow, was, ...) written out (the same operations, without its conversions)
+        self._slow = np.where(speed < p.standing_speed_mps, self._slow + 1, 0)
+        self._standing = np.where(was, ~(speed >= p.resume_speed_mps), self._slow >= p.standing_frames)
         n_p = p.n_particles
         started = was & ~self._standing
         if np.count_nonzero(started):  # walks again: head where the track goes
