@@ -103,8 +103,11 @@ def laser_log_likelihood_cols(cols: np.ndarray, feet_obs: np.ndarray, inter_feet
 
     # The four squared foot-to-barycentre distances in one pass, each |p - f|² = dx² + dy² as written out:
     # rows (l-f1, l-f2, r-f1, r-f2) x (x, y)
-    d = cols[_FOOT_ROWS]  # (8, n_t, n_p): lx ly lx ly rx ry rx ry
-    d -= f.reshape(n_t, 4).T[_OBS_ROWS][:, :, None]  # f1x f1y f2x f2y f1x f1y f2x f2y
+    # (8, n_t, n_p): (lx ly lx ly rx ry rx ry) - (f1x f1y f2x f2y f1x f1y f2x f2y), one broadcast subtraction:
+    # feet (l, r) x barycentre (f1, f2) x (x, y)
+    n_p = cols.shape[2]
+    d = np.subtract(cols[0:4].reshape(2, 1, 2, n_t, n_p), f.reshape(n_t, 4).T.reshape(1, 2, 2, n_t, 1))
+    d = d.reshape(8, n_t, n_p)
     d *= d
     d4 = d[0::2] + d[1::2]  # (4, n_t, n_p): dl1, dl2, dr1, dr2
     dl1, dl2, dr1, dr2 = d4
@@ -138,10 +141,6 @@ def laser_log_likelihood_cols(cols: np.ndarray, feet_obs: np.ndarray, inter_feet
     if any_missing:
         log_l[missing] = 0.0
     return log_l
-
-
-_FOOT_ROWS = np.array([0, 1, 0, 1, 2, 3, 2, 3])
-_OBS_ROWS = np.array([0, 1, 2, 3, 0, 1, 2, 3])
 
 
 def _vector(value: object, dtype: type, n: int) -> np.ndarray:

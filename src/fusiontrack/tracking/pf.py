@@ -165,12 +165,12 @@ def reweight(weights: np.ndarray, log_likelihood: np.ndarray) -> tuple[np.ndarra
         lw = lw + log_likelihood
     if lw.dtype != np.float64:
         return normalise_log_weights(lw)
-    m = lw.max(axis=-1, keepdims=True)  # NaN propagates through max: a finite m means no NaN, no inf row
+    m = np.maximum.reduce(lw, axis=-1, keepdims=True)  # (= lw.max) NaN propagates: a finite m means no NaN, no inf
     if not _all(np.isfinite(m)):
         return normalise_log_weights(lw)  # the general path (NaN, all -inf, +inf)
     lw -= m  # as normalise_log_weights, on our own buffer
     np.exp(lw, out=lw)
-    lw /= lw.sum(axis=-1, keepdims=True)
+    lw /= np.add.reduce(lw, axis=-1, keepdims=True)  # (= lw.sum, without the method's wrapper)
     return lw, np.zeros(lw.shape[:-1], bool)
 
 

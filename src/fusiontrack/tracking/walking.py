@@ -292,11 +292,11 @@ def _walk_cols(cols: np.ndarray, dt_s: float, rng: np.random.Generator, noise: W
         noise_cols = standard_normal(_check_rng(rng), cols.shape)
         noise_cols *= sig[:, None]
         cols += noise_cols  # n_p, n_ψ, n_φ, n_T, n_S
-        # clip T and S (np.clip's values: max then min; the ufuncs directly, np.clip's wrapper is slow)
-        for row, (lo, hi) in ((PERIOD, PERIOD_RANGE_S), (STRIDE, STRIDE_RANGE_M)):
-            c = cols[row]
-            np.maximum(c, lo, out=c)
-            np.minimum(c, hi, out=c)
+        # clip T and S (np.clip's values: max then min; the ufuncs directly, np.clip's wrapper is slow), both rows
+        # at once (PERIOD, STRIDE are rows 6, 7)
+        c = cols[PERIOD:STRIDE + 1]
+        np.maximum(c, _CLIP_LO, out=c)
+        np.minimum(c, _CLIP_HI, out=c)
     phi, period = cols[PHI], cols[PERIOD]
     sin_a, cos_a = _sincos(cols[PSI:PHI + 1])
     ux, uy = cos_a[0], sin_a[0]
@@ -319,20 +319,24 @@ def _walk_cols(cols: np.ndarray, dt_s: float, rng: np.random.Generator, noise: W
     ang += TWO_PI * np.floor((np.pi - ang) * (1.0 / TWO_PI))  # wrap ψ, φ to (-π, π]
 
 
-_SIGMAS: dict[tuple[WalkingNoise, float], np.ndarray] = {}
+_LAST_SIGMAS: list[tuple[WalkingNoise | None, np.ndarray | None]] = [(None, None)]  # (noise, its σ per column)
+_CLIP_LO = np.array([[PERIOD_RANGE_S[0]], [STRIDE_RANGE_M[0]]])
+_CLIP_HI = np.array([[PERIOD_RANGE_S[1]], [STRIDE_RANGE_M[1]]])
 
 
 def _walking_sigmas(nz: WalkingNoise, k: float) -> np.ndarray:
-    """``k`` times the per-column σ of the walking state (cached: the same few values every step)."""
-    sig = _SIGMAS.get((nz, k))
-    if sig is None:
-        sig = k * np.array([nz.foot_m, nz.foot_m, nz.foot_m, nz.foot_m, nz.heading_rad, nz.phase_rad,
-                            nz.period_s, nz.stride_m])
-        sig.setflags(write=False)
-        if len(_SIGMAS) > 256:
-            _SIGMAS.clear()
-        _SIGMAS[(nz, k)] = sig
-    return sig
+    """``k`` times the per-column σ of the walking state.
+
+    The σ of the last noise object are kept (the tracker passes the same one every step; hashing the dataclass
+    for a cache keyed by ``(nz, k)`` cost more than the product, and ``k`` changes with every scan interval).
+    """
+    last = _LAST_SIGMAS[0]
+    if last[0] is not nz:
+        base = np.array([nz.foot_m, nz.foot_m, nz.foot_m, nz.foot_m, nz.heading_rad, nz.phase_rad, nz.period_s,
+                         nz.stride_m])
+        base.setflags(write=False)
+        last = _LAST_SIGMAS[0] = (nz, base)  # one tuple: read and replaced whole (threads)
+    return k * last[1]
 
 
 def predict_standing(state: np.ndarray, dt_s: float, rng: np.random.Generator,
