@@ -1119,9 +1119,10 @@ class LaserPeopleTracker:
         new_walkers: list[dict[str, Any]] = []
 
         # ---- merges (B7 rule 1, B17): targets sharing one detection become one merged target
-        if n_t:
+        groups = sf.merge_groups if n_t else {}
+        if groups:
             dead = np.concatenate([dead_w, dead_m])
-            for j, group in sf.merge_groups.items():
+            for j, group in groups.items():
                 group = group[~dead[group]]
                 if group.size >= 2:
                     new_merged.append(self._merge(group, j, det, t_ns, gone_w, gone_m))
