@@ -579,22 +579,29 @@ class _Merged:
         if points is not None and points.shape[0] >= 2 * m:
             c = pred.copy()
             px, py = points[:, 0], points[:, 1]
+            pxc, pyc = px[:, None], py[:, None]
             for _ in range(2):
-                lab = _pair_d2(points, c).argmin(axis=1)
+                # _pair_d2(points, c) written out on the columns taken once: dx² + dy²
+                d2 = pxc - c[:, 0]
+                d2 *= d2
+                dy = pyc - c[:, 1]
+                dy *= dy
+                d2 += dy
+                lab = d2.argmin(axis=1)
                 cnt = np.bincount(lab, minlength=m)
                 sx = np.bincount(lab, px, minlength=m)
                 sy = np.bincount(lab, py, minlength=m)
-                has = cnt >= 2
-                if _all(has):
+                if np.minimum.reduce(cnt) >= 2:  # every member has 2 points or more
                     c[:, 0] = sx / cnt
                     c[:, 1] = sy / cnt
                 else:
+                    has = cnt >= 2
                     c[has, 0] = sx[has] / cnt[has]
                     c[has, 1] = sy[has] / cnt[has]
             res = c - pred
         else:
             res = np.broadcast_to(centre - pred.mean(axis=0), pred.shape)
-        norm = np.sqrt((res**2).sum(axis=1, keepdims=True))
+        norm = np.sqrt(np.add.reduce(res * res, axis=1, keepdims=True))  # (res**2 is res * res; = .sum)
         res = res * np.minimum(1.0, max_step_m / np.maximum(norm, 1e-12))
         pos = pred + alpha * res
         if m >= 2 and min_gap_m > 0:
