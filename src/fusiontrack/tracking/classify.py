@@ -67,6 +67,7 @@ class TrackClassifier:
         self._votes: dict[int, deque[str]] = {}
         self._cls: dict[int, str] = {}
         self._seen: dict[int, int] = {}  # track id -> last time it was reported
+        self._oldest: int | None = None  # at most the oldest time in _seen (None: not known)
 
     def classes(self) -> dict[int, str]:
         """The current class of every track reported in the last 5 s."""
@@ -77,14 +78,23 @@ class TrackClassifier:
         live = [s for s in states if s.t_ns == t_ns]
         for s in live:
             self._seen[s.track_id] = t_ns
+        if live and self._oldest is not None and t_ns < self._oldest:
+            self._oldest = t_ns
         # Forget tracks not reported for a while (their windows hold point arrays): a long run stays bounded.
-        for tid in [tid for tid, seen in self._seen.items() if t_ns - seen > _FORGET_NS]:
-            del self._seen[tid]
-            self._rows.pop(tid, None)
-            self._votes.pop(tid, None)
-            self._cls.pop(tid, None)
+        # (Nothing to forget while the oldest time is recent enough: no scan of every track each frame.)
+        if self._oldest is None or t_ns - self._oldest > _FORGET_NS:
+            for tid in [tid for tid, seen in self._seen.items() if t_ns - seen > _FORGET_NS]:
+                del self._seen[tid]
+                self._rows.pop(tid, None)
+                self._votes.pop(tid, None)
+                self._cls.pop(tid, None)
+            self._oldest = min(self._seen.values(), default=None)
         if live and detections:
-            have = [d for d in detections if d.features.get("points_m") is not None and len(d.features["points_m"])]
+            have = []
+            for d in detections:
+                pts = d.features.get("points_m")
+                if pts is not None and len(pts):
+                    have.append(d)
             if have:
                 centres = np.array([d.position_m for d in have])
                 pos = np.array([s.position_m for s in live])

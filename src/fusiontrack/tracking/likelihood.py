@@ -18,6 +18,7 @@ __all__ = [
     "centroid_log_likelihood",
     "laser_likelihood",
     "laser_log_likelihood",
+    "laser_log_likelihood_cols",
 ]
 
 
@@ -65,26 +66,48 @@ def laser_log_likelihood(state: np.ndarray, feet_obs: np.ndarray, inter_feet: np
         ``<= 0``; exactly 0 on rows without a detection.
     """
     x = np.asarray(state, dtype=np.float64)
-    f = np.asarray(feet_obs, dtype=np.float64)
-    n_t = x.shape[0]
     if x.ndim != 3 or x.shape[-1] != STATE_DIM:
         raise ValueError(f"state: expected shape (n_t, n_p, {STATE_DIM}), got {x.shape}")
+    cols = np.ascontiguousarray(x.reshape(-1, STATE_DIM).T).reshape(STATE_DIM, *x.shape[:2])  # (8, n_t, n_p)
+    return laser_log_likelihood_cols(cols, feet_obs, inter_feet, one_foot, sigma_f, sigma_w, sigma_f_one=sigma_f_one,
+                                     kappa=kappa, lateral_m=lateral_m)
+
+
+def laser_log_likelihood_cols(cols: np.ndarray, feet_obs: np.ndarray, inter_feet: np.ndarray, one_foot: np.ndarray,
+                              sigma_f: float = 0.10, sigma_w: float = 0.10, *, sigma_f_one: float = 0.15,
+                              kappa: float = 1.0 / np.pi, lateral_m: float = 0.0,
+                              missing: np.ndarray | None = None) -> np.ndarray:
+    """:func:`laser_log_likelihood` of particles in the column layout ``(8, n_t, n_p)`` (``cols[c]`` is column
+    ``c`` of every particle, as the laser tracker keeps them): the same values, without a transpose per call.
+
+    ``missing (n_t,) bool``, optional: the rows without a detection when the caller knows them, given as finite
+    values (e.g. zeros: they are not used, the rows' log-likelihood is 0); default: the rows holding ``NaN``.
+    """
+    f = np.asarray(feet_obs, dtype=np.float64)
+    if cols.ndim != 3 or cols.shape[0] != STATE_DIM:
+        raise ValueError(f"cols: expected shape ({STATE_DIM}, n_t, n_p), got {cols.shape}")
+    n_t = cols.shape[1]
     if f.shape != (n_t, 2, 2):
         raise ValueError(f"feet_obs: expected shape ({n_t}, 2, 2), got {f.shape}")
     sd = _vector(inter_feet, np.float64, n_t)
     one = _vector(one_foot, bool, n_t)
-    missing = np.isnan(f).any(axis=(1, 2)) | (np.isnan(sd) & ~one)
-    any_missing = np.count_nonzero(missing) > 0
-    if any_missing:
-        f = np.where(missing[:, None, None], 0.0, f)
-        sd = np.where(missing, 0.0, sd)
+    if missing is None:
+        missing = np.isnan(f).any(axis=(1, 2)) | (np.isnan(sd) & ~one)
+        any_missing = np.count_nonzero(missing) > 0
+        if any_missing:
+            f = np.where(missing[:, None, None], 0.0, f)
+            sd = np.where(missing, 0.0, sd)
+    else:
+        any_missing = np.count_nonzero(missing) > 0
     any_one = np.count_nonzero(one) > 0
 
-    cols = np.ascontiguousarray(x.reshape(-1, STATE_DIM).T).reshape(STATE_DIM, n_t, x.shape[1])  # (8, n_t, n_p)
     # The four squared foot-to-barycentre distances in one pass, each |p - f|² = dx² + dy² as written out:
     # rows (l-f1, l-f2, r-f1, r-f2) x (x, y)
-    d = cols[_FOOT_ROWS]  # (8, n_t, n_p): lx ly lx ly rx ry rx ry
-    d -= f.reshape(n_t, 4).T[_OBS_ROWS][:, :, None]  # f1x f1y f2x f2y f1x f1y f2x f2y
+    # (8, n_t, n_p): (lx ly lx ly rx ry rx ry) - (f1x f1y f2x f2y f1x f1y f2x f2y), one broadcast subtraction:
+    # feet (l, r) x barycentre (f1, f2) x (x, y)
+    n_p = cols.shape[2]
+    d = np.subtract(cols[0:4].reshape(2, 1, 2, n_t, n_p), f.reshape(n_t, 4).T.reshape(1, 2, 2, n_t, 1))
+    d = d.reshape(8, n_t, n_p)
     d *= d
     d4 = d[0::2] + d[1::2]  # (4, n_t, n_p): dl1, dl2, dr1, dr2
     dl1, dl2, dr1, dr2 = d4
@@ -118,10 +141,6 @@ def laser_log_likelihood(state: np.ndarray, feet_obs: np.ndarray, inter_feet: np
     if any_missing:
         log_l[missing] = 0.0
     return log_l
-
-
-_FOOT_ROWS = np.array([0, 1, 0, 1, 2, 3, 2, 3])
-_OBS_ROWS = np.array([0, 1, 2, 3, 0, 1, 2, 3])
 
 
 def _vector(value: object, dtype: type, n: int) -> np.ndarray:

@@ -22,6 +22,7 @@ __all__ = [
     "max_weight_cluster_mean",
     "normalise_log_weights",
     "resample_where",
+    "resample_where_cols",
     "reweight",
     "standard_normal",
     "systematic_resample",
@@ -152,20 +153,24 @@ def reweight(weights: np.ndarray, log_likelihood: np.ndarray) -> tuple[np.ndarra
     -------
     weights, degenerate : see :func:`normalise_log_weights`.
     """
-    with np.errstate(divide="ignore"):
-        lw = np.log(_check_weights(weights))
+    w = _check_weights(weights)
+    if np.count_nonzero(w) == w.size:  # the usual case: no zero weight, no log(0) to silence (errstate costs µs)
+        lw = np.log(w)
+    else:
+        with np.errstate(divide="ignore"):
+            lw = np.log(w)
     if lw.shape == np.shape(log_likelihood):
         lw += log_likelihood  # lw is ours: add in place (the same sums)
     else:
         lw = lw + log_likelihood
     if lw.dtype != np.float64:
         return normalise_log_weights(lw)
-    m = lw.max(axis=-1, keepdims=True)  # NaN propagates through max: a finite m means no NaN, no inf row
+    m = np.maximum.reduce(lw, axis=-1, keepdims=True)  # (= lw.max) NaN propagates: a finite m means no NaN, no inf
     if not _all(np.isfinite(m)):
         return normalise_log_weights(lw)  # the general path (NaN, all -inf, +inf)
     lw -= m  # as normalise_log_weights, on our own buffer
     np.exp(lw, out=lw)
-    lw /= lw.sum(axis=-1, keepdims=True)
+    lw /= np.add.reduce(lw, axis=-1, keepdims=True)  # (= lw.sum, without the method's wrapper)
     return lw, np.zeros(lw.shape[:-1], bool)
 
 
@@ -207,12 +212,28 @@ def systematic_resample(weights: np.ndarray, rng: np.random.Generator | None = N
     n_out = n_p if n is None else int(n)
     if n_out < 1:
         raise ValueError(f"n: expected >= 1 draws, got {n}")
+    counts = _systematic_counts(w, _offsets(n_t, n_out, rng, u0), n_out)
+    flat = np.repeat(np.arange(n_t * n_p), counts.ravel())  # indices into w.ravel(): row-major
+    if flat_out:
+        return flat
+    idx = flat.reshape(n_t, n_out) - (np.arange(n_t) * n_p)[:, None]
+    return idx[0] if squeeze else idx
+
+
+def _offsets(n_t: int, n_out: int, rng: np.random.Generator | None,
+             u0: np.ndarray | float | None) -> np.ndarray:
+    """The offsets ``u0`` of :func:`systematic_resample`, ``(n_t,)``: drawn from ``rng``, or checked."""
     if u0 is None:
-        u = _check_rng(rng).random(n_t) / n_out
-    else:
-        u = np.broadcast_to(np.asarray(u0, dtype=np.float64), (n_t,))
-        if np.any(u < 0) or np.any(u >= 1.0 / n_out):
-            raise ValueError(f"u0: expected values in [0, 1/N) = [0, {1.0 / n_out}), got {u}")
+        return _check_rng(rng).random(n_t) / n_out
+    u = np.broadcast_to(np.asarray(u0, dtype=np.float64), (n_t,))
+    if np.any(u < 0) or np.any(u >= 1.0 / n_out):
+        raise ValueError(f"u0: expected values in [0, 1/N) = [0, {1.0 / n_out}), got {u}")
+    return u
+
+
+def _systematic_counts(w: np.ndarray, u: np.ndarray, n_out: int) -> np.ndarray:
+    """How many times :func:`systematic_resample` draws each particle, ``(n_t, n_p)`` intp (rows sum to ``n_out``)."""
+    n_p = w.shape[1]
     cum = np.cumsum(w, axis=1)
     if not _all(cum[:, -1] > 0):  # an all-zero row: uniform
         cum = np.where(cum[:, -1:] > 0, cum, np.arange(1.0, n_p + 1.0))
@@ -226,11 +247,34 @@ def systematic_resample(weights: np.ndarray, rng: np.random.Generator | None = N
     n_below[:, -1] = n_out  # C_last = 1 > u_{N-1} exactly; guard against rounding
     counts = n_below.copy()
     counts[:, 1:] -= n_below[:, :-1]
-    flat = np.repeat(np.arange(n_t * n_p), counts.ravel())  # indices into w.ravel(): row-major
-    if flat_out:
-        return flat
-    idx = flat.reshape(n_t, n_out) - (np.arange(n_t) * n_p)[:, None]
-    return idx[0] if squeeze else idx
+    return counts
+
+
+def _resample_flat(w: np.ndarray, sel: np.ndarray, rng: np.random.Generator | None,
+                   u0: np.ndarray | float | None) -> np.ndarray | None:
+    """Ancestor indices into the flattened ``(n_t * n_p)`` particles: systematic resampling of the rows selected by
+    ``sel (n_t,) bool`` (the draws of :func:`systematic_resample` on ``w[sel]``), every other particle its own
+    ancestor; one gather then resamples the selected rows and copies the others. ``None`` when no row is selected.
+    """
+    n_t, n_p = w.shape
+    n_sel = np.count_nonzero(sel)
+    if not n_sel:
+        return None
+    if n_sel == n_t:
+        counts = _systematic_counts(w, _offsets(n_t, n_p, rng, u0), n_p)
+    else:
+        counts = np.ones((n_t, n_p), np.intp)  # unselected rows: each particle once, in place
+        counts[sel] = _systematic_counts(w[sel], _offsets(n_sel, n_p, rng, u0), n_p)
+    return np.repeat(np.arange(n_t * n_p), counts.ravel())
+
+
+def _resampled_weights(w: np.ndarray, sel: np.ndarray) -> np.ndarray:
+    n_p = w.shape[1]
+    if np.count_nonzero(sel) == sel.size:
+        return np.full_like(w, 1.0 / n_p)
+    out = w.copy()
+    out[sel] = 1.0 / n_p
+    return out
 
 
 def resample_where(particles: np.ndarray, weights: np.ndarray, mask: np.ndarray | bool,
@@ -266,17 +310,42 @@ def resample_where(particles: np.ndarray, weights: np.ndarray, mask: np.ndarray 
         sel = mask  # the usual case: no broadcast_to (slow on small arrays)
     else:
         sel = np.broadcast_to(np.asarray(mask, dtype=bool), (n_t,))
-    if _all(sel):
-        flat = systematic_resample(w, rng, u0=u0, flat_out=True)
-        return np.take(x.reshape(n_t * n_p, d), flat, axis=0).reshape(x.shape), np.full_like(w, 1.0 / n_p)
-    x_out, w_out = x.copy(), w.copy()
-    if np.count_nonzero(sel):
-        rows = sel.nonzero()[0]
-        flat = systematic_resample(w[rows], rng, u0=u0, flat_out=True)
-        flat += np.repeat((rows - np.arange(rows.size)) * n_p, n_p)  # sub-array rows -> full rows
-        x_out[rows] = np.take(x.reshape(n_t * n_p, d), flat, axis=0).reshape(rows.size, n_p, d)
-        w_out[rows] = 1.0 / n_p
-    return x_out, w_out
+    flat = _resample_flat(w, sel, rng, u0)
+    if flat is None:
+        return x.copy(), w.copy()
+    return np.take(x.reshape(n_t * n_p, d), flat, axis=0).reshape(x.shape), _resampled_weights(w, sel)
+
+
+def resample_where_cols(cols: np.ndarray, weights: np.ndarray, mask: np.ndarray,
+                        rng: np.random.Generator | None = None,
+                        *, u0: np.ndarray | float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`resample_where` of particles in the column layout ``(d, n_t, n_p)`` (``cols[c]`` is column ``c`` of
+    every particle; the laser tracker's layout): the same draws and values.
+
+    Parameters
+    ----------
+    cols : (d, n_t, n_p) float, C-contiguous
+    weights : (n_t, n_p) float
+    mask : (n_t,) bool
+    rng, u0 : see :func:`resample_where`.
+
+    Returns
+    -------
+    cols : (d, n_t, n_p)
+        A new array.
+    weights : (n_t, n_p) float64
+    """
+    w = _check_weights(weights)
+    if cols.ndim != 3 or w.shape != cols.shape[1:]:
+        raise ValueError(f"cols (d, n_t, n_p) and weights (n_t, n_p) disagree: {cols.shape} vs {w.shape}")
+    sel = np.asarray(mask, dtype=bool)
+    if sel.shape != (w.shape[0],):
+        raise ValueError(f"mask: expected shape ({w.shape[0]},), got {sel.shape}")
+    flat = _resample_flat(w, sel, rng, u0)
+    if flat is None:
+        return cols.copy(), w.copy()
+    d = cols.shape[0]
+    return np.take(cols.reshape(d, -1), flat, axis=1).reshape(cols.shape), _resampled_weights(w, sel)
 
 
 def _circular_cols(d: int, circular: Sequence[int] | None) -> np.ndarray:

@@ -118,7 +118,7 @@ class SituationFrame:
     def merge_groups(self) -> dict[int, np.ndarray]:
         """``{shared detection: member target indices (sorted)}`` for every merge this frame."""
         on = self.merge_det >= 0
-        if not on.any():  # the usual frame: no merge (np.unique is slow on tiny arrays)
+        if not np.count_nonzero(on):  # the usual frame: no merge (np.unique is slow on tiny arrays)
             return {}
         dets = np.unique(self.merge_det[on])
         return {int(j): np.flatnonzero(self.merge_det == j) for j in dets}
@@ -196,11 +196,16 @@ def classify_situations(c: np.ndarray, r: np.ndarray, found: np.ndarray, merged_
         if not c_l[i] > 0:
             nearest_l[i] = -1
     # rule 1: a shared detection whose gating targets all found only it
-    merge_at = (rr == 2) & ~fnd[cc != 1].any(axis=0)  # (n_d,)
     # (such targets have c = 1: one detection each)
-    merging = fnd[:, merge_at].any(axis=1).tolist() if np.count_nonzero(merge_at) else [False] * n_t
-    # rule 2: every gated detection found by this target alone
-    all_r1 = (~fnd[:, rr != 1].any(axis=1)).tolist()
+    # (no detection found by two targets, the usual frame: no merge)
+    if 2 in r_l:
+        merge_at = (rr == 2) & ~np.logical_or.reduce(fnd[cc != 1], axis=0) if c_l.count(1) != n_t else rr == 2
+        merging = np.logical_or.reduce(fnd[:, merge_at], axis=1).tolist() if np.count_nonzero(merge_at) \
+            else [False] * n_t
+    else:
+        merging = [False] * n_t
+    # rule 2: every gated detection found by this target alone (read for targets with c = 2 only)
+    all_r1 = (~np.logical_or.reduce(fnd[:, rr != 1], axis=1)).tolist() if 2 in c_l else [False] * n_t
     merged_l, edge_t_l = merged.tolist(), edge_t.tolist()
     labels_l = [0] * n_t
     merge_det_l = [-1] * n_t
@@ -235,16 +240,23 @@ def classify_situations(c: np.ndarray, r: np.ndarray, found: np.ndarray, merged_
         elif rj == 2:
             det_l[j] = _D_SHARED
     if apart_rows:
-        extra = fnd[apart_rows].any(axis=0).tolist()
+        extra = np.logical_or.reduce(fnd[apart_rows], axis=0).tolist()
         for i in apart_rows:
             extra[nearest_l[i]] = False
         for j in range(n_d):
             if extra[j] and r_l[j] != 0:
                 det_l[j] = _D_SPLIT_CANDIDATE
     det_labels = np.array(det_l, dtype=np.int8)
-    return SituationFrame(_frozen(labels), _frozen(det_labels), _frozen(merge_det), _frozen(nearest),
-                          _frozen(fnd.copy()))
+    # (the frozen dataclass's own constructor sets each field through object.__setattr__: slower than the slots')
+    frame = object.__new__(SituationFrame)
+    for set_field, value in zip(_FRAME_SETTERS, (labels, det_labels, merge_det, nearest, fnd.copy()), strict=True):
+        set_field(frame, _frozen(value))
+    return frame
 
+
+_FRAME_SETTERS = tuple(SituationFrame.__dict__[name].__set__
+                       for name in ("target_labels", "det_labels", "merge_det", "nearest_det", "found"))
+assert len(_FRAME_SETTERS) == len(SituationFrame.__slots__)  # every field is set
 
 _T_NONCORRELATED, _T_CORRELATED, _T_MERGING, _T_MERGED, _T_SPLITTING, _T_COASTING, _T_DISAPPEARING = (
     int(TargetLabel.NONCORRELATED), int(TargetLabel.CORRELATED), int(TargetLabel.MERGING), int(TargetLabel.MERGED),

@@ -6,8 +6,8 @@
 per confirmed live track; the situation events of the step are in :attr:`LaserPeopleTracker.events`.
 The step follows ARCHITECTURE.md's "Tracker step" (ALGORITHMS.md sections in brackets):
 
-1. **predict** — all walking targets at once, ``(n_targets, n_particles, 8)`` particles: the two-feet
-   walking model, or the random walk for people standing still [B8]; merged targets by a
+1. **predict** — all walking targets at once, ``(8, n_targets, n_particles)`` particles (column layout): the
+   two-feet walking model, or the random walk for people standing still [B8]; merged targets by a
    constant-velocity Kalman filter on their segment centre [B17, X5];
 2. **gate** — ``D_kj`` between every predicted centre (particle mean of the feet midpoint) and every
    detection centre, association states ``c``/``r`` [B6];
@@ -89,8 +89,8 @@ from ..errors import ConfigError
 from ..types import Detection, Event, ObjectClass, Situation, TrackState
 from . import kalman
 from .association import association_states, gate_distances, hungarian
-from .likelihood import laser_log_likelihood
-from .pf import resample_where, reweight, standard_normal
+from .likelihood import laser_log_likelihood_cols
+from .pf import resample_where_cols, reweight, standard_normal
 from .situations import SITUATION_OF_LABEL, TargetLabel, classify_situations, on_edge
 from .walking import (
     PERIOD,
@@ -100,8 +100,7 @@ from .walking import (
     StandingNoise,
     WalkingNoise,
     init_walking,
-    predict_people,
-    update_standing,
+    predict_people_cols,
 )
 
 __all__ = [
@@ -124,6 +123,19 @@ _DISAPPEARING_S, _NONCORRELATED_S = str(Situation.DISAPPEARING), str(Situation.N
 _NONCORRELATED, _CORRELATED = int(TargetLabel.NONCORRELATED), int(TargetLabel.CORRELATED)
 _MERGING, _MERGED, _SPLITTING = int(TargetLabel.MERGING), int(TargetLabel.MERGED), int(TargetLabel.SPLITTING)
 _COASTING, _DISAPPEARING = int(TargetLabel.COASTING), int(TargetLabel.DISAPPEARING)
+_NO_INDEX = np.zeros(0, np.int64)
+_NO_INDEX.setflags(write=False)
+_WANTS_DETECTION = np.zeros(256, bool)  # by target label: the labels that take their nearest detection
+_WANTS_DETECTION[[_NONCORRELATED, _CORRELATED, _MERGED]] = True
+
+
+def _starts(sizes: list[int]) -> list[int]:
+    """Start index of each block of the given sizes (``np.minimum.reduceat``'s indices)."""
+    out, k = [], 0
+    for n in sizes:
+        out.append(k)
+        k += n
+    return out
 
 
 def _all(a: np.ndarray) -> bool:
@@ -402,13 +414,15 @@ def detection_arrays(detections: Sequence[Detection]) -> DetectionArrays:
                         dtype=np.float64)
     inter = np.array(inter_l, dtype=np.float64)
     one = np.array(one_l, dtype=bool)
-    missing = np.isnan(inter) if all_feet else np.isnan(inter) & has_feet
-    if np.count_nonzero(missing):
-        inter[missing] = np.hypot(*(feet[missing, 0] - feet[missing, 1]).T)
-    one |= ~np.isfinite(inter) if all_feet else ~has_feet | ~np.isfinite(inter)
+    if not (all_feet and math.isfinite(np.add.reduce(inter))):  # (a finite sum: every value finite, the usual case)
+        missing = np.isnan(inter) if all_feet else np.isnan(inter) & has_feet
+        if np.count_nonzero(missing):
+            inter[missing] = np.hypot(*(feet[missing, 0] - feet[missing, 1]).T)
+        one |= ~np.isfinite(inter) if all_feet else ~has_feet | ~np.isfinite(inter)
     if np.count_nonzero(one):
         inter = np.where(one, 0.0, inter)
-    if _all(np.isfinite(centres)) and _all(np.isfinite(feet)):  # the usual case: every row ok
+    if (math.isfinite(np.add.reduce(centres, axis=None)) and math.isfinite(np.add.reduce(feet, axis=None))) or (
+            _all(np.isfinite(centres)) and _all(np.isfinite(feet))):  # the usual case: every row ok
         return DetectionArrays(centres, feet, inter, one, tuple(points))
     ok = np.isfinite(centres).all(axis=1) & np.isfinite(feet).all(axis=(1, 2))
     if ok.all():
@@ -565,33 +579,42 @@ class _Merged:
         if points is not None and points.shape[0] >= 2 * m:
             c = pred.copy()
             px, py = points[:, 0], points[:, 1]
+            pxc, pyc = px[:, None], py[:, None]
             for _ in range(2):
-                lab = _pair_d2(points, c).argmin(axis=1)
+                # _pair_d2(points, c) written out on the columns taken once: dx² + dy²
+                d2 = pxc - c[:, 0]
+                d2 *= d2
+                dy = pyc - c[:, 1]
+                dy *= dy
+                d2 += dy
+                lab = d2.argmin(axis=1)
                 cnt = np.bincount(lab, minlength=m)
                 sx = np.bincount(lab, px, minlength=m)
                 sy = np.bincount(lab, py, minlength=m)
-                has = cnt >= 2
-                if _all(has):
+                if np.minimum.reduce(cnt) >= 2:  # every member has 2 points or more
                     c[:, 0] = sx / cnt
                     c[:, 1] = sy / cnt
                 else:
+                    has = cnt >= 2
                     c[has, 0] = sx[has] / cnt[has]
                     c[has, 1] = sy[has] / cnt[has]
             res = c - pred
         else:
             res = np.broadcast_to(centre - pred.mean(axis=0), pred.shape)
-        norm = np.sqrt((res**2).sum(axis=1, keepdims=True))
+        norm = np.sqrt(np.add.reduce(res * res, axis=1, keepdims=True))  # (res**2 is res * res; = .sum)
         res = res * np.minimum(1.0, max_step_m / np.maximum(norm, 1e-12))
         pos = pred + alpha * res
         if m >= 2 and min_gap_m > 0:
+            pl = pos.tolist()  # (the differences of Python floats: the values of pos[b] - pos[a])
             for a, b in itertools.combinations(range(m), 2):
-                d = pos[b] - pos[a]
-                n = float(np.hypot(d[0], d[1]))
+                n = float(np.hypot(pl[b][0] - pl[a][0], pl[b][1] - pl[a][1]))
                 if n < min_gap_m:
+                    d = pos[b] - pos[a]
                     u = d / n if n > 1e-9 else np.array([1.0, 0.0])
                     push = 0.5 * (min_gap_m - n) * u
                     pos[a] -= push
                     pos[b] += push
+                    pl = pos.tolist()
             res = pos - pred
         self.pos = pos
         if dt > 0:
@@ -709,31 +732,38 @@ assert len(_STATE_SETTERS) == len(TrackState.__slots__)  # every field is set
 
 
 _CV_MATRICES: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
-_H = kalman.H_POSITION
-_HT = _H.swapaxes(-1, -2)
-_EYE2, _EYE4 = np.eye(2), np.eye(4)
-_R_EYES: dict[float, np.ndarray] = {}
+_EYE4 = np.eye(4)
 
 
 def _merged_kalman_update(x: np.ndarray, P: np.ndarray, z: np.ndarray, r2: float) -> tuple[np.ndarray, np.ndarray]:
-    """``kalman.update(x[None], P[None], z[None], R=r2)`` of one merged target, returned as ``(x (4,), P (4, 4))``:
-    the same numpy operations on the same arrays, without the checks and conversions (hot path; ``z`` is a
-    finite detection centre)."""
-    Rm = _R_EYES.get(r2)
-    if Rm is None:
-        if len(_R_EYES) > 16:
-            _R_EYES.clear()
-        Rm = _R_EYES[r2] = np.asarray(r2, dtype=np.float64) * _EYE2
-    xs, Ps = x[None], P[None]
-    y = z[None] - xs @ _H.T
-    S = _H @ Ps @ _HT + Rm
-    PHt = Ps @ _HT
-    K = np.linalg.solve(S, PHt.swapaxes(-1, -2)).swapaxes(-1, -2)
-    x_new = xs + np.einsum("nij,nj->ni", K, y)
-    IKH = _EYE4 - K @ _H
-    P_new = IKH @ Ps @ IKH.swapaxes(-1, -2) + K @ Rm @ K.swapaxes(-1, -2)
-    P_new = 0.5 * (P_new + P_new.swapaxes(-1, -2))
-    return x_new[0], P_new[0]
+    """``kalman.update(x[None], P[None], z[None], R=r2)`` of one merged target, returned as ``(x (4,), P (4, 4))``
+    (hot path; ``z`` is a finite detection centre, ``P`` a finite covariance).
+
+    The same values as the general update, bit for bit, at half the cost: with ``H = [I 0]`` the products
+    ``H x``, ``H P Hᵀ`` and ``P Hᵀ`` are slices (a product with 0/1 entries is exact), and the gain
+    ``K = P Hᵀ S⁻¹`` is LAPACK's ``gesv`` on the 2 x 2 innovation covariance written out: LU with partial
+    pivoting, divisions as multiplications by the pivots' reciprocals, as OpenBLAS computes them (checked equal
+    to ``np.linalg.solve`` on every merged-target update of crowd and groups seeds 0-2); a ``numpy.linalg`` call
+    costs more than the rest of the update.
+    """
+    y = z - x[0:2]
+    a00, a01, a10, a11 = P[0, 0] + r2, P[0, 1], P[1, 0], P[1, 1] + r2  # S = H P Hᵀ + r² I
+    b0, b1 = P[:, 0], P[:, 1]  # the right-hand sides: the rows of (P Hᵀ)ᵀ
+    if abs(a10) > abs(a00):  # partial pivoting (the first of equal magnitudes stays)
+        a00, a01, a10, a11, b0, b1 = a10, a11, a00, a01, b1, b0
+    r = 1.0 / a00
+    low = a10 * r
+    k1 = (b1 - low * b0) * (1.0 / (a11 - low * a01))
+    k0 = (b0 - a01 * k1) * r
+    K = np.empty((4, 2))
+    K[:, 0] = k0
+    K[:, 1] = k1
+    x_new = x + np.einsum("ij,j->i", K, y)
+    IKH = _EYE4.copy()  # I - K H
+    IKH[:, 0:2] -= K
+    P_new = IKH @ P @ IKH.T + (r2 * K) @ K.T  # K R Kᵀ with R = r² I: K R is exactly r² K
+    P_new = 0.5 * (P_new + P_new.T)
+    return x_new, P_new
 
 
 # --------------------------------------------------------------------------------------------------
@@ -775,7 +805,7 @@ class LaserPeopleTracker:
         Steps ignored because their time was not after the previous step's (out of order).
     """
 
-    _WALKING_ARRAYS = ("_x", "_w", "_id", "_seen", "_pos", "_lag", "_vel", "_slow", "_standing", "_born",
+    _WALKING_ARRAYS = ("_w", "_id", "_seen", "_pos", "_lag", "_vel", "_slow", "_standing", "_born",
                        "_born_edge")
 
     def __init__(self, params: TrackerParams | Mapping[str, Any] | None = None, *, area_m: Any = None,
@@ -794,8 +824,9 @@ class LaserPeopleTracker:
         self.events: list[Event] = []
         self.dropped_steps = 0
         n_p = p.n_particles
-        # walking targets, one row each
-        self._x = np.zeros((0, n_p, 8))
+        # walking targets, one row each; the particles in the column layout (8, n_targets, n_particles):
+        # self._x[c] is column c (walking.py) of every particle
+        self._x = np.zeros((8, 0, n_p))
         self._w = np.zeros((0, n_p))
         self._id = np.zeros(0, np.int64)
         self._seen = np.zeros(0, np.int64)  # time of the last detection
@@ -915,7 +946,7 @@ class LaserPeopleTracker:
         if dt <= 0:
             return
         if self._id.size:
-            self._x = predict_people(self._x, self._standing, dt, self.rng, p.walking_noise, p.standing_noise)
+            self._x = predict_people_cols(self._x, self._standing, dt, self.rng, p.walking_noise, p.standing_noise)
         if self._merged:
             fq = _CV_MATRICES.get((dt, p.merged_q))
             if fq is None:  # the same few step lengths over and over: cache them
@@ -929,15 +960,24 @@ class LaserPeopleTracker:
                 m.predict(dt, p.member_tau_s)
 
     def _walking_centres(self, mid: np.ndarray | None = None) -> np.ndarray:
-        """Particle mean of the feet midpoint of every walking target; ``mid`` (``x[..., 0:2] + x[..., 2:4]``,
-        the feet sums of the current particles) when the caller already has it."""
+        """Particle mean of the feet midpoint of every walking target, ``(n_t, 2)``; ``mid`` (``(2, n_t, n_p)``,
+        the feet sums of the current particles, :meth:`_feet_sums`) when the caller already has it.
+
+        ``0.5 Σ_p w_tp mid_tp``, summed particle after particle: the products go to a ``(n_p, n_t, 2)`` buffer
+        whose reduction over its outer axis adds them in order (the sums ``einsum("tp,tpk->tk")`` makes of the
+        row layout, bit for bit; a reduction along a contiguous axis would sum pairwise).
+        """
         if mid is None:
             mid = self._feet_sums()
-        return 0.5 * np.einsum("tp,tpk->tk", self._w, mid)
+        w = self._w
+        prod = np.empty((w.shape[1], w.shape[0], 2))
+        np.multiply(w.T[:, :, None], mid.transpose(2, 1, 0), out=prod)
+        return 0.5 * np.add.reduce(prod, axis=0)
 
     def _feet_sums(self) -> np.ndarray:
+        """``left + right`` foot position of every particle, ``(2, n_t, n_p)``."""
         x = self._x
-        return x[..., 0:2] + x[..., 2:4]
+        return x[0:2] + x[2:4]
 
     def _update(self, t_ns: int, dt: float, det: DetectionArrays) -> list[TrackState]:
         p = self.params
@@ -948,22 +988,27 @@ class LaserPeopleTracker:
         cw = self._walking_centres(mid)
         if n_m:
             centres = np.concatenate([cw, np.array([m.x[0:2] for m in merged])])
-            D = np.concatenate([gate_distances(cw, det.centres, p.bandwidth_m)]
-                               + [gate_distances(m.pos, det.centres, p.bandwidth_m).min(axis=0, keepdims=True)
-                                  for m in merged])  # a merged target gates with each of its members
+            # a merged target gates with each of its members: one matrix for every walking target and member,
+            # then each merged target's rows reduced to their minimum (the same values as one matrix each)
+            sizes = [m.pos.shape[0] for m in merged]
+            G = gate_distances(np.concatenate([cw] + [m.pos for m in merged]), det.centres, p.bandwidth_m)
+            D = np.concatenate([G[:n_w], np.minimum.reduceat(G[n_w:], _starts(sizes), axis=0)]) if n_d else G[:n_t]
         else:
             centres = cw
             D = gate_distances(cw, det.centres, p.bandwidth_m)
         c, r, found = association_states(D, p.gate)
-        edge_t = self._edge(centres)
-        edge_d = self._edge(det.centres)
+        if n_d:  # one edge test for targets and detections
+            edge = self._edge(np.concatenate([centres, det.centres]))
+            edge_t, edge_d = edge[:n_t], edge[n_t:]
+        else:
+            edge_t, edge_d = self._edge(centres), self._edge(det.centres)
         merged_mask = np.zeros(n_t, bool)
         merged_mask[n_w:] = True
         sf = classify_situations(c, r, found, merged_mask, edge_t, edge_d, D)
         labels = sf.target_labels
 
         # ---- one detection per target (B10 nearest neighbour, one-to-one by Hungarian when contested)
-        want = (labels == _NONCORRELATED) | (labels == _CORRELATED) | (labels == _MERGED)
+        want = _WANTS_DETECTION[labels]  # NONCORRELATED, CORRELATED or MERGED
         assigned = np.full(n_t, -1, np.int64)
         rows = want.nonzero()[0]
         if rows.size and n_d:
@@ -989,25 +1034,32 @@ class LaserPeopleTracker:
         # ---- walking targets: B9 likelihood with the assigned detection, resample (X1, B10)
         aw = assigned[:n_w]
         upd = aw >= 0
-        if np.count_nonzero(upd):
-            feet = np.full((n_w, 2, 2), np.nan)
-            sd = np.zeros(n_w)
-            one = np.zeros(n_w, bool)
-            j = aw[upd]
-            feet[upd], sd[upd], one[upd] = det.feet[j], det.inter_feet[j], det.one_foot[j]
-            ll = laser_log_likelihood(self._x, feet, sd, one, p.sigma_f_m, p.sigma_w_m, sigma_f_one=p.sigma_f_one_m,
-                                      kappa=p.kappa, lateral_m=p.lateral_m)
+        n_upd = np.count_nonzero(upd)
+        if n_upd:
+            if n_upd == n_w:  # every walking target has a detection
+                feet, sd, one, missing = det.feet[aw], det.inter_feet[aw], det.one_foot[aw], np.zeros(n_w, bool)
+            else:  # the others' rows: zeros, flagged missing (log-likelihood 0)
+                feet = np.zeros((n_w, 2, 2))
+                sd = np.zeros(n_w)
+                one = np.zeros(n_w, bool)
+                j = aw[upd]
+                feet[upd], sd[upd], one[upd] = det.feet[j], det.inter_feet[j], det.one_foot[j]
+                missing = ~upd
+            ll = laser_log_likelihood_cols(self._x, feet, sd, one, p.sigma_f_m, p.sigma_w_m,
+                                           sigma_f_one=p.sigma_f_one_m, kappa=p.kappa, lateral_m=p.lateral_m,
+                                           missing=missing)
             if self._extra_ll is not None:  # fusion hook (B16): the camera's score map for correlated targets
                 corr = (upd & (labels[:n_w] == _CORRELATED)).nonzero()[0]
                 if corr.size:
-                    xc = self._x[corr]
-                    extra = self._extra_ll(t_ns, self._id[corr].copy(), 0.5 * (xc[..., 0:2] + xc[..., 2:4]))
+                    xc = self._x[:, corr]
+                    mid_c = np.ascontiguousarray(np.moveaxis(0.5 * (xc[0:2] + xc[2:4]), 0, -1))  # (n, n_p, 2)
+                    extra = self._extra_ll(t_ns, self._id[corr].copy(), mid_c)
                     if extra is not None:
                         ll[corr] = ll[corr] + np.asarray(extra, np.float64)
             self._w, _ = reweight(self._w, ll)
             self._seen[upd] = t_ns
             pos = self._walking_centres(mid)
-            self._x, self._w = resample_where(self._x, self._w, upd, self.rng)
+            self._x, self._w = resample_where_cols(self._x, self._w, upd, self.rng)
         else:
             pos = cw
         self._track_velocity(pos, dt)
@@ -1030,12 +1082,14 @@ class LaserPeopleTracker:
                     split_now.append(i)
                     claimed[js] = True
             else:
-                js = assigned[row:row + 1][assigned[row:row + 1] >= 0]
+                a = int(assigned[row])
+                js = np.array([a], np.int64) if a >= 0 else _NO_INDEX
             if js.size == 0:
                 continue
+            js_l = js.tolist()
             # one detection: its centre (the mean of one row is that row); else the mean, as np.mean sums / n
-            z = det.centres[js[0]].copy() if js.size == 1 else det.centres[js].mean(axis=0)
-            pts = [det.points[j] for j in js.tolist()] if det.points else []
+            z = det.centres[js_l[0]].copy() if len(js_l) == 1 else det.centres[js].mean(axis=0)
+            pts = [det.points[j] for j in js_l] if det.points else []
             if pts and all(q is not None for q in pts):  # (one segment: its own points, read only)
                 points = pts[0] if len(pts) == 1 else np.concatenate(pts)
             else:
@@ -1072,9 +1126,10 @@ class LaserPeopleTracker:
         new_walkers: list[dict[str, Any]] = []
 
         # ---- merges (B7 rule 1, B17): targets sharing one detection become one merged target
-        if n_t:
+        groups = sf.merge_groups if n_t else {}
+        if groups:
             dead = np.concatenate([dead_w, dead_m])
-            for j, group in sf.merge_groups.items():
+            for j, group in groups.items():
                 group = group[~dead[group]]
                 if group.size >= 2:
                     new_merged.append(self._merge(group, j, det, t_ns, gone_w, gone_m))
@@ -1136,6 +1191,7 @@ class LaserPeopleTracker:
         # ---- apply the structure changes
         if np.count_nonzero(gone_w):
             keep = ~gone_w
+            self._x = np.ascontiguousarray(self._x[:, keep])
             for name in self._WALKING_ARRAYS:
                 setattr(self, name, getattr(self, name)[keep])
         if np.count_nonzero(gone_m) or new_merged:
@@ -1178,18 +1234,23 @@ class LaserPeopleTracker:
         pairs, _, _ = hungarian(cost)
         for a, b in pairs:
             row, j = int(lost[a]), int(free[b])
-            x, w = self._x[row], self._w[row]
+            x, w = self._particles(row), self._w[row]
             v = det.centres[j] - self._pos[row]
             heading = float(np.arctan2(v[1], v[0])) if np.hypot(*v) >= 0.1 else float(
                 np.arctan2(w @ np.sin(x[:, PSI]), w @ np.cos(x[:, PSI])))
             spec = self._new_walker(int(self._id[row]), det, j, self._vel[row], heading, t_ns,
                                     period_s=float(w @ x[:, PERIOD]), stride_m=float(w @ x[:, STRIDE]),
                                     standing=bool(self._standing[row]))
-            self._x[row] = spec["x"]
+            self._x[:, row] = spec["x"].T
             self._w[row] = 1.0 / p.n_particles
             assigned[row] = j
             claimed[j] = True
         return len(pairs) > 0
+
+    def _particles(self, row: int) -> np.ndarray:
+        """The particles of walking target ``row`` as rows, ``(n_p, 8)`` C-contiguous (the array the row layout
+        held: reductions over it, e.g. ``w @ x[:, PERIOD]``, give the values they gave)."""
+        return np.ascontiguousarray(self._x[:, row].T)
 
     def _merge(self, group: np.ndarray, j: int, det: DetectionArrays, t_ns: int, gone_w: np.ndarray,
                gone_m: np.ndarray) -> _Merged:
@@ -1199,7 +1260,7 @@ class LaserPeopleTracker:
         pos, vel, info, parts = [], [], [], []
         for row in group:
             if row < n_w:
-                x, w = self._x[row], self._w[row]
+                x, w = self._particles(row), self._w[row]
                 heading = float(np.arctan2(w @ np.sin(x[:, PSI]), w @ np.cos(x[:, PSI])))
                 info.append(_MemberInfo(int(self._id[row]), float(w @ x[:, PERIOD]), float(w @ x[:, STRIDE]),
                                         heading, bool(self._standing[row]), int(self._born[row]),
@@ -1353,13 +1414,14 @@ class LaserPeopleTracker:
             self._vel = (pos - self._lag) / lag_s
         speed = np.hypot(self._vel[:, 0], self._vel[:, 1])
         was = self._standing
-        self._slow, self._standing = update_standing(speed, self._slow, self._standing, p.standing_speed_mps,
-                                                     p.standing_frames, p.resume_speed_mps)
+        # update_standing(speed, self._slow, was, ...) written out (the same operations, without its conversions)
+        self._slow = np.where(speed < p.standing_speed_mps, self._slow + 1, 0)
+        self._standing = np.where(was, ~(speed >= p.resume_speed_mps), self._slow >= p.standing_frames)
         n_p = p.n_particles
         started = was & ~self._standing
         if np.count_nonzero(started):  # walks again: head where the track goes
             psi = np.arctan2(self._vel[started, 1], self._vel[started, 0])
-            self._x[started, :, PSI] = psi[:, None] + p.init_heading_sigma_rad * self.rng.standard_normal(
+            self._x[PSI, started, :] = psi[:, None] + p.init_heading_sigma_rad * self.rng.standard_normal(
                 (int(started.sum()), n_p))
         if p.reseed_fraction > 0 and dt > 0:
             rows = (~self._standing & (speed > p.resume_speed_mps)).nonzero()[0]
@@ -1367,9 +1429,13 @@ class LaserPeopleTracker:
                 k = max(1, round(p.reseed_fraction * n_p))
                 start = self._reseed_at
                 self._reseed_at = (start + k) % max(n_p - k + 1, 1)
-                psi = np.arctan2(self._vel[rows, 1], self._vel[rows, 0])
-                self._x[rows, start:start + k, PSI] = psi[:, None] + p.init_heading_sigma_rad * standard_normal(
-                    self.rng, (rows.size, k))
+                vel = self._vel if rows.size == self._id.size else self._vel[rows]  # everyone (the usual case)
+                psi = np.arctan2(vel[:, 1], vel[:, 0])
+                psi = psi[:, None] + p.init_heading_sigma_rad * standard_normal(self.rng, (rows.size, k))
+                if rows.size == self._id.size:  # a basic slice: no fancy-index scatter
+                    self._x[PSI, :, start:start + k] = psi
+                else:
+                    self._x[PSI, rows, start:start + k] = psi
 
     def _new_walker(self, tid: int, det: DetectionArrays, j: int, v0: np.ndarray, heading: float, t_ns: int, *,
                     period_s: float = 1.1, stride_m: float | None = None, standing: bool | None = None,
@@ -1390,7 +1456,7 @@ class LaserPeopleTracker:
     def _add_walking(self, *, track_id: int, x: np.ndarray, pos: np.ndarray, vel: np.ndarray, seen: int,
                      standing: bool, born: int, born_edge: bool) -> None:
         n_p = self.params.n_particles
-        self._x = np.concatenate([self._x, x[None]])
+        self._x = np.concatenate([self._x, x.T[:, None, :]], axis=1)
         self._w = np.concatenate([self._w, np.full((1, n_p), 1.0 / n_p)])
         self._id = np.append(self._id, track_id)
         self._seen = np.append(self._seen, seen)

@@ -64,6 +64,7 @@ __all__ = [
     "init_walking",
     "predict_cv",
     "predict_people",
+    "predict_people_cols",
     "predict_standing",
     "predict_walking",
     "predicted_feet_distance",
@@ -277,19 +278,25 @@ def predict_walking(state: np.ndarray, dt_s: float, rng: np.random.Generator,
     x = _check_state(state, STATE_DIM)
     if not dt_s >= 0.0:
         raise ValueError(f"dt_s: expected a time step >= 0 s, got {dt_s}")
-    nz = WalkingNoise() if noise is None else noise
-    sig = _walking_sigmas(nz, nz.scale(dt_s))
     # work on contiguous columns, (8, n_t * n_p): numpy is slow on inner axes of length 2-8
     cols = np.ascontiguousarray(x.reshape(-1, STATE_DIM).T)
+    _walk_cols(cols, dt_s, rng, noise)
+    return np.ascontiguousarray(cols.T).reshape(x.shape)
+
+
+def _walk_cols(cols: np.ndarray, dt_s: float, rng: np.random.Generator, noise: WalkingNoise | None) -> None:
+    """:func:`predict_walking` in place on the column layout ``(8, n)`` (C-contiguous, ``dt_s >= 0``)."""
+    nz = WalkingNoise() if noise is None else noise
+    sig = _walking_sigmas(nz, nz.scale(dt_s))
     if np.count_nonzero(sig):
         noise_cols = standard_normal(_check_rng(rng), cols.shape)
         noise_cols *= sig[:, None]
         cols += noise_cols  # n_p, n_ψ, n_φ, n_T, n_S
-        # clip T and S (np.clip's values: max then min; the ufuncs directly, np.clip's wrapper is slow)
-        for row, (lo, hi) in ((PERIOD, PERIOD_RANGE_S), (STRIDE, STRIDE_RANGE_M)):
-            c = cols[row]
-            np.maximum(c, lo, out=c)
-            np.minimum(c, hi, out=c)
+        # clip T and S (np.clip's values: max then min; the ufuncs directly, np.clip's wrapper is slow), both rows
+        # at once (PERIOD, STRIDE are rows 6, 7)
+        c = cols[PERIOD:STRIDE + 1]
+        np.maximum(c, _CLIP_LO, out=c)
+        np.minimum(c, _CLIP_HI, out=c)
     phi, period = cols[PHI], cols[PERIOD]
     sin_a, cos_a = _sincos(cols[PSI:PHI + 1])
     ux, uy = cos_a[0], sin_a[0]
@@ -310,24 +317,26 @@ def predict_walking(state: np.ndarray, dt_s: float, rng: np.random.Generator,
     phi += omega_dt
     ang = cols[PSI:PHI + 1]
     ang += TWO_PI * np.floor((np.pi - ang) * (1.0 / TWO_PI))  # wrap ψ, φ to (-π, π]
-    out = np.ascontiguousarray(cols.T).reshape(x.shape)
-    return out
 
 
-_SIGMAS: dict[tuple[WalkingNoise, float], np.ndarray] = {}
+_LAST_SIGMAS: list[tuple[WalkingNoise | None, np.ndarray | None]] = [(None, None)]  # (noise, its σ per column)
+_CLIP_LO = np.array([[PERIOD_RANGE_S[0]], [STRIDE_RANGE_M[0]]])
+_CLIP_HI = np.array([[PERIOD_RANGE_S[1]], [STRIDE_RANGE_M[1]]])
 
 
 def _walking_sigmas(nz: WalkingNoise, k: float) -> np.ndarray:
-    """``k`` times the per-column σ of the walking state (cached: the same few values every step)."""
-    sig = _SIGMAS.get((nz, k))
-    if sig is None:
-        sig = k * np.array([nz.foot_m, nz.foot_m, nz.foot_m, nz.foot_m, nz.heading_rad, nz.phase_rad,
-                            nz.period_s, nz.stride_m])
-        sig.setflags(write=False)
-        if len(_SIGMAS) > 256:
-            _SIGMAS.clear()
-        _SIGMAS[(nz, k)] = sig
-    return sig
+    """``k`` times the per-column σ of the walking state.
+
+    The σ of the last noise object are kept (the tracker passes the same one every step; hashing the dataclass
+    for a cache keyed by ``(nz, k)`` cost more than the product, and ``k`` changes with every scan interval).
+    """
+    last = _LAST_SIGMAS[0]
+    if last[0] is not nz:
+        base = np.array([nz.foot_m, nz.foot_m, nz.foot_m, nz.foot_m, nz.heading_rad, nz.phase_rad, nz.period_s,
+                         nz.stride_m])
+        base.setflags(write=False)
+        last = _LAST_SIGMAS[0] = (nz, base)  # one tuple: read and replaced whole (threads)
+    return k * last[1]
 
 
 def predict_standing(state: np.ndarray, dt_s: float, rng: np.random.Generator,
@@ -350,16 +359,25 @@ def predict_standing(state: np.ndarray, dt_s: float, rng: np.random.Generator,
     state : (n_t, n_p, 8) float64
     """
     x = _check_state(state, STATE_DIM)
+    cols = _stand_cols(np.moveaxis(x, -1, 0), dt_s, rng, noise)
+    return np.ascontiguousarray(np.moveaxis(cols, 0, -1))
+
+
+def _stand_cols(x: np.ndarray, dt_s: float, rng: np.random.Generator, noise: StandingNoise | None) -> np.ndarray:
+    """:func:`predict_standing` on the column layout ``(8, n_t, n_p)`` (a view of any strides); a new array.
+
+    The noise is drawn as :func:`predict_standing` draws it, ``(n_t, n_p, 8)``: the same values either way.
+    """
     nz = StandingNoise() if noise is None else noise
     k = nz.scale(dt_s)
-    r = standard_normal(_check_rng(rng), x.shape)
-    out = x.copy()
-    body = k * nz.body_m * r[..., 6:8]
-    out[..., 0:4] += k * nz.foot_m * r[..., 0:4]
-    out[..., LEFT] += body
-    out[..., RIGHT] += body
-    out[..., PSI] = _wrap(x[..., PSI] + k * nz.heading_rad * r[..., PSI])
-    out[..., PHI] = _wrap(x[..., PHI] + k * nz.phase_rad * r[..., PHI])
+    r = np.moveaxis(standard_normal(_check_rng(rng), (*x.shape[1:], STATE_DIM)), -1, 0)
+    out = np.array(x, dtype=np.float64, order="C")
+    body = k * nz.body_m * r[6:8]
+    out[0:4] += k * nz.foot_m * r[0:4]
+    out[LEFT] += body
+    out[RIGHT] += body
+    out[PSI] = _wrap(x[PSI] + k * nz.heading_rad * r[PSI])
+    out[PHI] = _wrap(x[PHI] + k * nz.phase_rad * r[PHI])
     return out
 
 
@@ -382,13 +400,44 @@ def predict_people(state: np.ndarray, standing: np.ndarray, dt_s: float, rng: np
     still = np.asarray(standing, dtype=bool)
     if still.shape != (x.shape[0],):
         raise ValueError(f"standing: expected shape ({x.shape[0]},), got {still.shape}")
-    if not np.count_nonzero(still):
-        return predict_walking(x, dt_s, rng, noise)
-    if np.count_nonzero(still) == still.size:
-        return predict_standing(x, dt_s, rng, standing_noise)
-    out = np.empty_like(x)
-    out[~still] = predict_walking(x[~still], dt_s, rng, noise)
-    out[still] = predict_standing(x[still], dt_s, rng, standing_noise)
+    if not dt_s >= 0.0 and np.count_nonzero(still) < still.size:  # (as predict_walking checks it)
+        raise ValueError(f"dt_s: expected a time step >= 0 s, got {dt_s}")
+    cols = predict_people_cols(np.ascontiguousarray(x.reshape(-1, STATE_DIM).T).reshape(STATE_DIM, *x.shape[:2]),
+                               still, dt_s, rng, noise, standing_noise)
+    return np.ascontiguousarray(cols.reshape(STATE_DIM, -1).T).reshape(x.shape)
+
+
+def predict_people_cols(cols: np.ndarray, standing: np.ndarray, dt_s: float, rng: np.random.Generator,
+                        noise: WalkingNoise | None = None, standing_noise: StandingNoise | None = None) -> np.ndarray:
+    """:func:`predict_people` on the column layout ``(8, n_t, n_p)`` (``cols[c]`` is column ``c`` of every
+    particle), the layout the laser tracker keeps its particles in: the same values, without transposing the
+    particles in and out on every step.
+
+    Parameters
+    ----------
+    cols : (8, n_t, n_p) float64, C-contiguous
+    standing : (n_t,) bool
+    dt_s : float
+        Time step, s (>= 0; not checked).
+    rng, noise, standing_noise : see :func:`predict_people`.
+
+    Returns
+    -------
+    cols : (8, n_t, n_p) float64
+        A new C-contiguous array.
+    """
+    n_s = np.count_nonzero(standing)
+    if not n_s:
+        out = cols.copy()
+        _walk_cols(out.reshape(STATE_DIM, -1), dt_s, rng, noise)
+        return out
+    if n_s == standing.size:
+        return _stand_cols(cols, dt_s, rng, standing_noise)
+    out = np.empty_like(cols)
+    walk = np.ascontiguousarray(cols[:, ~standing])  # a C-contiguous copy (a fancy index alone gives another order)
+    _walk_cols(walk.reshape(STATE_DIM, -1), dt_s, rng, noise)
+    out[:, ~standing] = walk
+    out[:, standing] = _stand_cols(cols[:, standing], dt_s, rng, standing_noise)
     return out
 
 
