@@ -152,3 +152,21 @@ def test_pf_matches_kalman_posterior_1d() -> None:
         particles, w = pf.resample_where(particles, w, pf.effective_sample_size(w) < n_p / 2, rng)
     # the spread matches too (looser: a second moment from 2000 samples)
     np.testing.assert_allclose(pf.weighted_cov(particles, w)[:, 0, 0], p, rtol=0.25)
+
+
+@pytest.mark.parametrize("mask", [[True, True, True], [False, True, False], [False, False, False]])
+def test_resample_where_cols_is_resample_where_in_the_column_layout(mask: list[bool]) -> None:
+    """The laser tracker's column layout (d, n_t, n_p) resamples exactly as the row layout (n_t, n_p, d): the same
+    draws from the same generator state, the same ancestors, the same weights."""
+    rng = np.random.default_rng(7)
+    x = rng.normal(size=(3, 50, 8))
+    w = rng.random((3, 50))
+    w /= w.sum(axis=1, keepdims=True)
+    sel = np.array(mask)
+    x_rows, w_rows = pf.resample_where(x, w, sel, np.random.default_rng(1))
+    cols, w_cols = pf.resample_where_cols(np.ascontiguousarray(np.moveaxis(x, -1, 0)), w, sel, np.random.default_rng(1))
+    assert np.array_equal(np.moveaxis(cols, 0, -1), x_rows)
+    assert np.array_equal(w_cols, w_rows)
+    # unselected targets keep their particles and weights as they were
+    assert np.array_equal(x_rows[~sel], x[~sel])
+    assert np.array_equal(w_rows[~sel], w[~sel])
