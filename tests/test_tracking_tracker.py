@@ -232,6 +232,53 @@ def test_two_walkers_meet_walk_together_and_separate_keep_their_identities() -> 
     assert set(merges[0].track_ids) == set(before)
 
 
+def _parallel_walkers(n: int, gap_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Two walkers side by side along +x, ``gap_m`` apart (y = 5 -/+ gap/2): positions (2, n, 2), feet (2, n, 2, 2)."""
+    pos, feet = [], []
+    for k, y in enumerate((5.0 - gap_m / 2, 5.0 + gap_m / 2)):
+        p, f = _walk(n, np.array([2.0, y]), np.zeros(n), 1.2, 1.4, phase0=1.7 * k)
+        pos.append(p)
+        feet.append(f)
+    return np.array(pos), np.array(feet)
+
+
+def _fused(t_ns: int, pos: np.ndarray) -> Detection:
+    """One segment holding both walkers (their inner feet), centred between them."""
+    mid = pos.mean(axis=0)
+    off = np.array([0.0, 0.2])
+    f = np.array([mid - off, mid + off])
+    return Detection(t_ns, "laser", position_m=mid, features={
+        "feet_m": f, "inter_feet_m": np.asarray(0.4), "one_foot": np.asarray(False)})
+
+
+@pytest.mark.parametrize(("fused_steps", "merges"), [(1, 0), (2, 0), (25, 1)])
+def test_a_segment_shared_for_one_or_two_frames_is_no_merge(fused_steps: int, merges: int) -> None:
+    """B7 rule 1 confirmed over N_confirm = 3 frames: two walkers 1 m apart (each finds only its own detection)
+    seen as one segment between them for ``fused_steps`` frames. One or two frames of a fused segment is no merge
+    (the measurement truth asks N_confirm frames of any state; the walkers are correlated then, B7 rule 3's
+    completion), a second of it is one merge and, when they are two segments again, one split."""
+    rng = np.random.default_rng(3)
+    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0)
+    n = 4 * 25
+    pos, feet = _parallel_walkers(n, 1.0)
+    events, situations = [], []
+    for k in range(n):
+        t_ns = k * FRAME_NS
+        fused = 40 <= k < 40 + fused_steps
+        dets = [_fused(t_ns, pos[:, k])] if fused else [_detection(t_ns, feet[w, k], rng) for w in (0, 1)]
+        states = trk.step(t_ns, dets)
+        events += trk.events
+        if fused:
+            situations.append({s.situation for s in states})
+    events += trk.finish()
+    kinds = [e.kind for e in events]
+    assert kinds.count("merge") == merges
+    assert kinds.count("split") == merges
+    if merges == 0:
+        assert situations == [{Situation.CORRELATED}] * fused_steps
+    assert {s.track_id for s in trk.step(n * FRAME_NS, [])} == {1, 2}  # the same two identities throughout
+
+
 # ---- bad sensor data -----------------------------------------------------------------------------------------
 
 

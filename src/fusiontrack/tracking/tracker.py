@@ -159,6 +159,13 @@ class TrackerParams:
     edge_min_age_s : float
         A target younger than this does not disappear on the edge (it coasts as inside): people seen in a
         doorway flicker in and out of view as they come in [RECON].
+    n_merge : int
+        Frames B7 rule 1 (one detection shared by targets that found only it) must hold for the same targets before
+        they merge, as ``N_confirm`` for a new detection (B7 rule 6); gaps up to ``candidate_gap_s`` in which
+        they do not each have a detection of their own do not restart the count. Until then they are
+        ``correlated`` (B7 rule 3's completion: they interact). One frame's fused segment is no merge: the
+        measurement truth (:func:`~fusiontrack.sim.situations.segment_situation_events`) asks ``N_confirm``
+        frames of a state too [RECON]. 1 merges at once.
     n_split : int
         Frames the split condition must hold before a merged target splits (hysteresis: two people side by
         side are one segment in one scan and two in the next; gaps up to ``candidate_gap_s`` do not restart
@@ -238,6 +245,7 @@ class TrackerParams:
     n_miss: int = 25
     n_miss_edge: int = 3
     edge_min_age_s: float = 1.0
+    n_merge: int = 3
     n_split: int = 5
     candidate_gate_m: float = 0.5
     candidate_gap_s: float = 0.25
@@ -294,7 +302,7 @@ class TrackerParams:
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
                 raise ConfigError(f"tracker parameter {name}: expected a finite value >= 0, got {v!r}")
-        for name in ("n_particles", "n_confirm", "n_confirm_interior", "n_miss", "n_miss_edge", "n_split",
+        for name in ("n_particles", "n_confirm", "n_confirm_interior", "n_miss", "n_miss_edge", "n_merge", "n_split",
                      "standing_frames"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
@@ -810,6 +818,7 @@ class LaserPeopleTracker:
         self._cand = CandidateSet(p.candidate_gate_m, p.candidate_gap_s)
         self._corr: dict[int, list[Any]] = {}  # track id -> [start, last, position]
         self._held_splits: dict[frozenset[int], Event] = {}
+        self._merge_wait: dict[frozenset[int], tuple[int, int]] = {}  # ids -> (first, last step) of rule 1
         self._frame_ns = p.frame_s * 1e9
         self._sensors = (p.sensor,)
         self._reseed_at = 0
@@ -907,6 +916,8 @@ class LaserPeopleTracker:
             runs[a] = rb
         if self._held_splits:
             self._held_splits = {frozenset(swap.get(t, t) for t in key): ev for key, ev in self._held_splits.items()}
+        if self._merge_wait:
+            self._merge_wait = {frozenset(swap.get(t, t) for t in key): v for key, v in self._merge_wait.items()}
         return True
 
     # ---------------------------------------------------------------------------------------------
@@ -961,6 +972,9 @@ class LaserPeopleTracker:
         merged_mask[n_w:] = True
         sf = classify_situations(c, r, found, merged_mask, edge_t, edge_d, D)
         labels = sf.target_labels
+        merge_groups = sf.merge_groups
+        if p.n_merge > 1 and (merge_groups or self._merge_wait):
+            labels, merge_groups = self._confirm_merges(sf, merge_groups, t_ns)
 
         # ---- one detection per target (B10 nearest neighbour, one-to-one by Hungarian when contested)
         want = (labels == _NONCORRELATED) | (labels == _CORRELATED) | (labels == _MERGED)
@@ -1074,7 +1088,7 @@ class LaserPeopleTracker:
         # ---- merges (B7 rule 1, B17): targets sharing one detection become one merged target
         if n_t:
             dead = np.concatenate([dead_w, dead_m])
-            for j, group in sf.merge_groups.items():
+            for j, group in merge_groups.items():
                 group = group[~dead[group]]
                 if group.size >= 2:
                     new_merged.append(self._merge(group, j, det, t_ns, gone_w, gone_m))
@@ -1165,6 +1179,39 @@ class LaserPeopleTracker:
         return states
 
     # ---------------------------------------------------------------------------------------------
+    def _confirm_merges(self, sf: Any, groups: dict[int, np.ndarray], t_ns: int
+                        ) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+        """B7 rule 1 confirmed over ``n_merge`` frames (see :class:`TrackerParams`): the groups that merge now, and
+        the labels with the waiting groups' walking targets ``correlated`` (merged targets stay ``merged``)."""
+        n_w = self._id.size
+        ids_of = [(int(t),) for t in self._id.tolist()] + [tuple(m.ids) for m in self._merged]
+        labels = sf.target_labels.copy()
+        need, gap = self._frames_ns(self.params.n_merge - 1), self._cand.gap_ns
+        wait = self._merge_wait
+        now, out = set(), {}
+        for j, rows in groups.items():
+            key = frozenset(i for row in rows.tolist() for i in ids_of[row])
+            now.add(key)
+            first, last = wait.get(key, (t_ns, t_ns))
+            if t_ns - last > gap:
+                first = t_ns
+            if t_ns - first >= need:
+                out[j] = rows
+                wait.pop(key, None)
+            else:
+                wait[key] = (first, t_ns)
+                labels[rows] = np.where(rows < n_w, _CORRELATED, _MERGED)
+        if len(wait) > len(now):  # waiting groups not sharing a detection this step: apart, or not seen
+            row_of = {i: row for row, ids in enumerate(ids_of) for i in ids}
+            nearest = sf.nearest_det.tolist()
+            for key in [k for k in wait if k not in now]:
+                rows = {row_of.get(i, -1) for i in key}
+                dets = [nearest[row] for row in rows if row >= 0]
+                apart = len(dets) >= 2 and min(dets) >= 0 and len(set(dets)) == len(dets)
+                if apart or -1 in rows or t_ns - wait[key][1] > gap:
+                    del wait[key]
+        return labels, out
+
     def _reacquire(self, lost: np.ndarray, cw: np.ndarray, det: DetectionArrays, claimed: np.ndarray,
                    assigned: np.ndarray, t_ns: int) -> bool:
         """Targets that found nothing take unclaimed detections within a gate that grows while they coast.
