@@ -279,6 +279,35 @@ def test_a_segment_shared_for_one_or_two_frames_is_no_merge(fused_steps: int, me
     assert {s.track_id for s in trk.step(n * FRAME_NS, [])} == {1, 2}  # the same two identities throughout
 
 
+def test_correlated_runs_change_state_after_n_confirm_frames() -> None:
+    """A walker passes a second, standing person 0.6 m to its side (in its gate: correlated, B7 rule 3) for 2 s,
+    the bystander's segment missing in one scan every 0.2 s; before and after, a clutter detection flashes 0.5 m
+    away for one scan every 0.5 s. The correlated state changes only when the other label holds N_confirm frames
+    (the measurement truth's rule): one run while they pass, none for the one-scan flashes."""
+    rng = np.random.default_rng(6)
+    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0, n_confirm_interior=1000)  # no interior births
+    n = 8 * 25
+    _, feet = _walk(n, np.array([0.2, 5.0]), np.zeros(n), 1.0, 1.3)  # enters at the edge: a track at once
+    stand = np.array([[4.2, 5.5], [4.2, 5.7]])  # the bystander's feet, 0.6 m to the walker's left at x = 4.2
+    events = []
+    for k in range(n):
+        t_ns = k * FRAME_NS
+        dets = [_detection(t_ns, feet[k], rng)]
+        t = k * FRAME_NS / 1e9
+        if 2.5 <= t < 5.5 and k % 5 != 0:  # within 1.5 m along x of the bystander's line
+            dets.append(_detection(t_ns, stand, rng))
+        elif k % 12 == 6:
+            dets.append(_detection(t_ns, feet[k] + [0.0, -0.5], rng))
+        trk.step(t_ns, dets)
+        events += trk.events
+    events += trk.finish()
+    walker = [e for e in events if e.kind == "correlated" and e.track_ids == (1,)]
+    assert len(walker) == 1
+    # in the gate (radius 0.8 m) while the walker is within 0.53 m along x of the bystander: t = 3.5 .. 4.5 s
+    assert 3.3 <= walker[0].t_ns / 1e9 <= 3.7
+    assert 4.3 <= walker[0].t_end_ns / 1e9 <= 4.7
+
+
 # ---- bad sensor data -----------------------------------------------------------------------------------------
 
 

@@ -146,6 +146,7 @@ __all__ = [
     "TRUTH_PERSISTENCE",
     "SegmentAnalysis",
     "SegmentFrame",
+    "bridge_correlated",
     "drop_undone_splits",
     "label_situations",
     "load_laser_hits",
@@ -163,10 +164,10 @@ EVENT_MERGE, EVENT_SPLIT, EVENT_CORRELATED, EVENT_APPEAR, EVENT_DISAPPEAR = (
 EVENT_KINDS = (EVENT_MERGE, EVENT_SPLIT, EVENT_CORRELATED, EVENT_APPEAR, EVENT_DISAPPEAR)
 
 TRUTH_PERSISTENCE = {"split_hold_s": 0.5, "correlated_gap_s": 0.4}
-"""The persistence rules benchmarks/laser_people.py applies to both sides in its second situation table:
-``correlated_gap_s`` is the tracker's own default; ``split_hold_s = 0.5 s`` is applied to the truth here and
-to the tracker's events with :func:`drop_undone_splits` (groups walk ~0.5-0.6 m apart, at ``d_merged``, and
-both their one/two-segment look and their centre distance cross it back and forth)."""
+"""The persistence rules benchmarks/laser_people.py applies to both sides in its second situation table: to the
+truth here, and to the tracker's events with :func:`drop_undone_splits` and :func:`bridge_correlated` (groups walk
+~0.5-0.6 m apart, at ``d_merged``, and both their one/two-segment look and their centre distance cross it back and
+forth)."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -810,6 +811,45 @@ def drop_undone_splits(events: Sequence[Event], hold_s: float) -> list[Event]:
                 dropped.update((i, q))
                 break
     return [e for i, e in enumerate(events) if i not in dropped]
+
+
+def bridge_correlated(events: Sequence[Event], gap_s: float) -> list[Event]:
+    """Join the ``correlated`` events of the same ``track_ids`` whose time spans are at most ``gap_s`` apart, unless a
+    ``merge`` naming one of those ids starts between them (the ``correlated_gap_s`` rule of :func:`situation_events`,
+    for any source of events). The joined event keeps the first one's position and unites the partners.
+
+    Returns all events, sorted by time (stable).
+    """
+    if not gap_s >= 0:
+        raise ValueError(f"gap_s: expected a value >= 0, got {gap_s!r}")
+    gap_ns = round(gap_s * 1e9)
+    events = sorted(events, key=lambda e: e.t_ns)
+    merges: dict[int, list[int]] = {}
+    for e in events:
+        if e.kind == EVENT_MERGE:
+            for i in e.track_ids:
+                merges.setdefault(i, []).append(e.t_ns)
+    out: list[Event] = []
+    open_run: dict[tuple[int, ...], int] = {}  # track_ids -> index in out of the last correlated event
+    for e in events:
+        if e.kind != EVENT_CORRELATED:
+            out.append(e)
+            continue
+        q = open_run.get(e.track_ids)
+        if q is not None:
+            prev = out[q]
+            end = prev.t_end_ns if prev.t_end_ns is not None else prev.t_ns
+            merged_between = any(end <= t <= e.t_ns for i in e.track_ids for t in merges.get(i, ()))
+            if e.t_ns - end <= gap_ns and not merged_between:
+                partners = set(prev.attributes.get("partners", ())) | set(e.attributes.get("partners", ()))
+                last = None if e.t_end_ns is None or prev.t_end_ns is None else max(prev.t_end_ns, e.t_end_ns)
+                attrs = {**prev.attributes, "partners": tuple(sorted(partners))} if partners else prev.attributes
+                out[q] = Event(prev.t_ns, prev.sensor, prev.kind, last, position_m=prev.position_m,
+                               track_ids=prev.track_ids, attributes=attrs)
+                continue
+        open_run[e.track_ids] = len(out)
+        out.append(e)
+    return sorted(out, key=lambda e: e.t_ns)
 
 
 def _correlated_event(agent: int, run: tuple[int, int, set[int], np.ndarray, int], sensor: str) -> Event:

@@ -53,7 +53,8 @@ scaled the same way (``dt_ref_s = frame_s``).
 Events
 ------
 ``Event.kind`` is one of ``merge``, ``split`` (``track_ids`` = the members), ``correlated`` (one per
-track and run of correlated steps, gaps up to ``correlated_gap_s`` bridged, emitted when the run ends),
+track and run of the correlated state, which changes after ``n_confirm`` frames of the other label; emitted when
+the run ends),
 ``appear`` (a track born from a candidate first seen on the edge; ``t_ns`` = first seen, ``t_end_ns`` =
 confirmation), ``disappear`` (a track ended on the edge; ``t_ns`` = last detection, ``t_end_ns`` = the
 end), and two kinds that seed 001 does not score: ``born`` (a track confirmed inside the area) and
@@ -216,8 +217,12 @@ class TrackerParams:
     max_dt_s : float
         Longest prediction step; a longer gap (every scanner silent) is predicted as this [RECON].
     correlated_gap_s, min_correlated_s : float
-        Gaps in a correlated run up to this long are bridged (one event); shorter runs than
-        ``min_correlated_s`` (default 0: every run) make no event [RECON].
+        A track's correlated state starts and ends when B7's label has held for ``n_confirm`` frames (in every
+        step with a detection: the measurement truth's rule, ``min_state_s``); runs up to ``correlated_gap_s`` apart
+        (default 0: none) are joined unless a merge came between; runs shorter than ``min_correlated_s`` (default
+        0: every run) make no event [RECON]. (Before: every correlated step counted and gaps up to 0.4 s were
+        bridged; on the simulated crowds one-step labels and 0.4 s bridges cut and joined runs where the truth
+        does not, about 2 false alarms per true run.)
     split_hold_s : float
         A ``split`` event is held back this long, and dropped (with the merge that undoes it) when the same
         people merge again in the meantime: one segment that flickers into two is no split. Off (0) by
@@ -278,7 +283,7 @@ class TrackerParams:
     reacquire_max_m: float = 2.0
     reseed_fraction: float = 0.1
     max_dt_s: float = 0.5
-    correlated_gap_s: float = 0.4
+    correlated_gap_s: float = 0.0
     min_correlated_s: float = 0.0
     split_hold_s: float = 0.0
     appear_window_s: float = 1.0
@@ -816,7 +821,9 @@ class LaserPeopleTracker:
         self._born_edge = np.zeros(0, bool)
         self._merged: list[_Merged] = []
         self._cand = CandidateSet(p.candidate_gate_m, p.candidate_gap_s)
-        self._corr: dict[int, list[Any]] = {}  # track id -> [start, last, position]
+        # track id -> [correlated (confirmed state), start of a change of state (0: none), last step with a detection,
+        # open run [start, last, position] or None, ended run held for correlated_gap_s or None]
+        self._corr: dict[int, list[Any]] = {}
         self._held_splits: dict[frozenset[int], Event] = {}
         self._merge_wait: dict[frozenset[int], tuple[int, int]] = {}  # ids -> (first, last step) of rule 1
         self._frame_ns = p.frame_s * 1e9
@@ -1123,14 +1130,15 @@ class LaserPeopleTracker:
                                                      self._born.tolist(), upd.tolist())
         pos_w, vel_w = self._pos, self._vel
         pos_f, vel_f = _frozen_copy(pos_w), _frozen_copy(vel_w)
+        corr = self._corr
         for row in (~gone_w).nonzero()[0].tolist():
             lab = w_lab_l[row]
             tid = id_l[row]
             sit = _SITUATION_NAMES[lab]
             if lab == _NONCORRELATED and born_edge_l[row] and t_ns - born_l[row] < appear_ns:
                 sit = _APPEARING
-            elif lab == _CORRELATED:
-                self._extend_correlated(tid, t_ns, pos_w[row])
+            if (lab == _CORRELATED or tid in corr) and lab != _COASTING and lab != _DISAPPEARING:
+                self._correlated_step(tid, t_ns, lab == _CORRELATED, pos_w[row])
             states.append(_fast_state(t_ns, sensor, tid, pos_f[row], vel_f[row], sit, sensors if upd_l[row] else (),
                                       frozen=True))
         for i in (~gone_m).nonzero()[0].tolist():
@@ -1170,8 +1178,12 @@ class LaserPeopleTracker:
         # ---- correlated runs that ended, splits that were not undone
         if self._corr:
             gap = p.correlated_gap_s * 1e9
-            for tid in [tid for tid, run in self._corr.items() if t_ns - run[1] > gap]:
-                self._close_correlated(tid)
+            for tid in [tid for tid, rec in self._corr.items() if rec[4] is not None and t_ns - rec[4][1] > gap]:
+                rec = self._corr[tid]
+                self._emit_correlated(tid, rec[4])
+                rec[4] = None
+                if not rec[0] and not rec[1] and rec[3] is None:
+                    del self._corr[tid]
         if self._held_splits:
             hold = p.split_hold_s * 1e9
             for key in [k for k, e in self._held_splits.items() if t_ns - e.t_ns > hold]:
@@ -1450,19 +1462,55 @@ class LaserPeopleTracker:
         self._born_edge = np.append(self._born_edge, born_edge)
 
     # ---------------------------------------------------------------------------------------------
-    def _extend_correlated(self, tid: int, t_ns: int, pos: np.ndarray) -> None:
-        run = self._corr.get(tid)
-        if run is not None and t_ns - run[1] <= self.params.correlated_gap_s * 1e9:
-            run[1] = t_ns
-            return
-        if run is not None:
-            self._close_correlated(tid)
-        self._corr[tid] = [t_ns, t_ns, pos.copy()]
+    def _correlated_step(self, tid: int, t_ns: int, correlated: bool, pos: np.ndarray) -> None:
+        """One step with a detection of walking target ``tid``: B7's label is ``correlated`` or not. The state
+        (correlated or not) changes when the other label has held for ``n_confirm`` frames in every step with a
+        detection (steps without one neither end nor extend a run; after ``n_miss`` frames without one the state
+        starts afresh); a run lasts from the first step of its change to its last correlated step. An ended run is
+        held for ``correlated_gap_s``: a new run that starts within it continues it [RECON]."""
+        corr = self._corr
+        rec = corr.get(tid)
+        if rec is None or t_ns - rec[2] > self._frames_ns(self.params.n_miss):
+            if rec is not None:
+                self._close_correlated(tid)
+            rec = corr[tid] = [False, 0, t_ns, None, None]
+        rec[2] = t_ns
+        if correlated == rec[0]:
+            rec[1] = 0
+        else:
+            if not rec[1]:
+                rec[1] = t_ns
+            if t_ns - rec[1] >= self._frames_ns(self.params.n_confirm - 1):
+                start, rec[0], rec[1] = rec[1], correlated, 0
+                if correlated:
+                    prev, rec[4] = rec[4], None
+                    if prev is not None and start - prev[1] <= self.params.correlated_gap_s * 1e9:
+                        rec[3] = prev
+                    else:
+                        if prev is not None:
+                            self._emit_correlated(tid, prev)
+                        rec[3] = [start, t_ns, pos.copy()]
+                else:
+                    rec[4], rec[3] = rec[3], None
+                    if rec[4] is not None and self.params.correlated_gap_s <= 0:
+                        self._emit_correlated(tid, rec[4])
+                        rec[4] = None
+        if correlated and rec[0]:
+            rec[3][1] = t_ns
+        elif not rec[0] and not rec[1] and rec[3] is None and rec[4] is None:
+            del corr[tid]
 
     def _close_correlated(self, tid: int) -> None:
-        """End the correlated run of ``tid``: one event, if it lasted ``min_correlated_s``."""
-        run = self._corr.pop(tid, None)
-        if run is not None and run[1] - run[0] >= self.params.min_correlated_s * 1e9:
+        """End the correlated runs of ``tid`` (held and open): one event each."""
+        rec = self._corr.pop(tid, None)
+        if rec is not None:
+            for run in (rec[4], rec[3]):
+                if run is not None:
+                    self._emit_correlated(tid, run)
+
+    def _emit_correlated(self, tid: int, run: list[Any]) -> None:
+        """One ``correlated`` event for a run ``[start, last, position]``, if it lasted ``min_correlated_s``."""
+        if run[1] - run[0] >= self.params.min_correlated_s * 1e9:
             self.events.append(Event(int(run[0]), self.params.sensor, "correlated", int(run[1]), position_m=run[2],
                                      track_ids=(tid,)))
 
