@@ -179,6 +179,26 @@ def test_a_walker_first_seen_a_metre_inside_came_in_from_the_edge(latency_s, kin
     assert [e.kind for e in events] == kinds
 
 
+@pytest.mark.parametrize(("glimpse_s", "kinds"), [(0.0, ["born"]), (5.0, ["appear"])])
+def test_a_walker_glimpsed_on_the_edge_then_hidden_appears(glimpse_s, kinds) -> None:
+    """Entering at x = 0.1 m at 1.3 m/s: seen in two scans on the edge (too few to confirm), hidden behind the door
+    frame until 2 m in. The measurement truth dates its appear by that glimpse; with the glimpse remembered the
+    tracker does too (appear, dated and placed by the glimpse), without it the walker is born inside."""
+    rng = np.random.default_rng(4)
+    trk = LaserPeopleTracker({"glimpse_s": glimpse_s}, area_m=(0.0, 0.0, 10.0, 4.0), rng=0)
+    n = 3 * 25
+    pos, feet = _walk(n, np.array([0.1, 2.0]), np.zeros(n), 1.3, 1.4)
+    events = []
+    for k in range(n):
+        seen = k < 2 or pos[k, 0] >= 2.0
+        trk.step(k * FRAME_NS, [_detection(k * FRAME_NS, feet[k], rng)] if seen else [])
+        events += trk.events
+    assert [e.kind for e in events] == kinds
+    if kinds == ["appear"]:
+        assert events[0].t_ns == 0
+        assert events[0].position_m[0] < 0.5
+
+
 def test_parameters_are_validated_by_name() -> None:
     with pytest.raises(ConfigError, match="n_particles"):
         TrackerParams(n_particles=0)

@@ -235,6 +235,12 @@ class TrackerParams:
         it was on the edge this long before: people coming through a door are first seen up to ~1 m in
         (in the doorway the frame hides their legs from scanners along the wall; then they need a few scans
         to stand out of the background) [RECON]. 0 keeps B7's rule (first position only).
+    glimpse_s, glimpse_speed_mps : float
+        A candidate first seen on the edge and dropped before it was confirmed (a person glimpsed in a doorway,
+        then hidden by the frame or by the people ahead) is remembered for ``glimpse_s``; a candidate confirmed
+        inside within ``2h + glimpse_speed_mps`` per second since the glimpse ended is that person: born on the
+        edge (``appear``, dated by the glimpse). The measurement truth dates an appear by the first glimpse on
+        the edge and confirms it by a later sighting anywhere [RECON]. 0 forgets glimpses.
     sensor : str
         ``TrackState.sensor``, ``Event.sensor`` and what ``TrackState.sensors`` names when a detection
         confirmed the track.
@@ -288,6 +294,8 @@ class TrackerParams:
     split_hold_s: float = 0.0
     appear_window_s: float = 1.0
     appear_latency_s: float = 0.75
+    glimpse_s: float = 5.0
+    glimpse_speed_mps: float = 1.5
     sensor: str = "laser"
 
     def __post_init__(self) -> None:
@@ -302,7 +310,8 @@ class TrackerParams:
                         "init_feet_sigma_m", "init_heading_sigma_rad", "init_period_sigma_s", "init_stride_sigma_m",
                         "merged_q", "correlated_gap_s", "appear_window_s", "member_beta", "member_min_gap_m",
                         "split_min_m", "blob_radius_m", "single_s", "reacquire_speed_mps", "min_correlated_s",
-                        "split_hold_s", "reacquire_max_m", "edge_min_age_s", "appear_latency_s")
+                        "split_hold_s", "reacquire_max_m", "edge_min_age_s", "appear_latency_s", "glimpse_s",
+                        "glimpse_speed_mps")
         for name in non_negative:
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
@@ -459,6 +468,8 @@ class CandidateSet:
         self.det = np.zeros(0, np.int64)
         self.n_multi = np.zeros(0, np.int64)  # frames whose segment showed >= 3 leg blobs
         self.n_many = np.zeros(0, np.int64)  # ... >= 5 leg blobs
+        # edge candidates dropped unconfirmed: (first_t, last_t, first_pos, last_pos), oldest first
+        self.glimpses: list[tuple[int, int, np.ndarray, np.ndarray]] = []
 
     _ARRAYS = ("first_t", "last_t", "hits", "first_pos", "pos", "edge", "det", "n_multi", "n_many")
 
@@ -490,6 +501,9 @@ class CandidateSet:
                 taken[c] = True
         keep = (t_ns - self.last_t) <= self.gap_ns
         if not _all(keep):
+            for q in (~keep & self.edge).nonzero()[0].tolist():
+                self.glimpses.append((int(self.first_t[q]), int(self.last_t[q]), self.first_pos[q].copy(),
+                                      self.pos[q].copy()))
             self._select(keep)
         new = (~taken).nonzero()[0]
         if new.size:
@@ -1348,6 +1362,11 @@ class LaserPeopleTracker:
                 # First seen inside, walking in: where was it appear_latency_s before it was first seen?
                 back = cd.first_pos[k] - v0 * p.appear_latency_s
                 edge = bool(self._edge(back[None])[0])
+            first_t, first_pos = int(cd.first_t[k]), cd.first_pos[k]
+            if not edge and cd.glimpses:
+                g = self._glimpse(first_t, first_pos)
+                if g is not None:
+                    edge, first_t, first_pos = True, g[0], g[2]
             kind = "appear" if edge else "born"
             n_people = 1
             if (p.multi_fraction is not None and det.points and det.points[j] is not None
@@ -1358,7 +1377,7 @@ class LaserPeopleTracker:
                 m = self._born_merged(det, j, n_people, v0, heading, t_ns, edge)
                 self._merged.append(m)
                 for q, info in enumerate(m.info):
-                    self.events.append(Event(int(cd.first_t[k]), p.sensor, kind, t_ns, position_m=m.pos[q].copy(),
+                    self.events.append(Event(first_t, p.sensor, kind, t_ns, position_m=m.pos[q].copy(),
                                              track_ids=(info.track_id,)))
                     states.append(_fast_state(t_ns, p.sensor, info.track_id, m.pos[q], m.vel[q], _MERGED_S,
                                               self._sensors))
@@ -1366,13 +1385,27 @@ class LaserPeopleTracker:
             tid = next(self._next_id)
             spec = self._new_walker(tid, det, j, v0, heading, t_ns, born_edge=edge)
             self._add_walking(**spec)
-            self.events.append(Event(int(cd.first_t[k]), p.sensor, kind, t_ns, position_m=cd.first_pos[k].copy(),
-                                     track_ids=(tid,)))
+            self.events.append(Event(first_t, p.sensor, kind, t_ns, position_m=first_pos.copy(), track_ids=(tid,)))
             states.append(_fast_state(t_ns, p.sensor, tid, spec["pos"], spec["vel"],
                                       _APPEARING if edge else _NONCORRELATED_S, self._sensors))
         if ready.size:
             cd.pop(ready)
+        if cd.glimpses and t_ns - cd.glimpses[0][1] > p.glimpse_s * 1e9:
+            cd.glimpses = [g for g in cd.glimpses if t_ns - g[1] <= p.glimpse_s * 1e9]
         return states
+
+    def _glimpse(self, first_t: int, first_pos: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray] | None:
+        """The latest remembered edge glimpse (:attr:`TrackerParams.glimpse_s`) that a candidate first seen at
+        ``first_t`` at ``first_pos`` can be, taken from the memory; ``None`` if there is none."""
+        p = self.params
+        gl = self._cand.glimpses
+        for q in range(len(gl) - 1, -1, -1):
+            _, g1, _, gpos = gl[q]
+            dt = (first_t - g1) / 1e9
+            if 0 < dt <= p.glimpse_s and float(np.hypot(*(first_pos - gpos))) <= (
+                    2.0 * p.bandwidth_m + p.glimpse_speed_mps * dt):
+                return gl.pop(q)
+        return None
 
     def _born_merged(self, det: DetectionArrays, j: int, n: int, v0: np.ndarray, heading: float, t_ns: int,
                      edge: bool) -> _Merged:
