@@ -271,14 +271,15 @@ def _fused(t_ns: int, pos: np.ndarray) -> Detection:
         "feet_m": f, "inter_feet_m": np.asarray(0.4), "one_foot": np.asarray(False)})
 
 
-@pytest.mark.parametrize(("fused_steps", "merges"), [(1, 0), (2, 0), (25, 1)])
-def test_a_segment_shared_for_one_or_two_frames_is_no_merge(fused_steps: int, merges: int) -> None:
-    """B7 rule 1 confirmed over N_confirm = 3 frames: two walkers 1 m apart (each finds only its own detection)
-    seen as one segment between them for ``fused_steps`` frames. One or two frames of a fused segment is no merge
-    (the measurement truth asks N_confirm frames of any state; the walkers are correlated then, B7 rule 3's
-    completion), a second of it is one merge and, when they are two segments again, one split."""
+@pytest.mark.parametrize(("n_merge", "fused_steps", "merges"), [(3, 1, 0), (3, 2, 0), (3, 25, 1), (1, 1, 1)])
+def test_a_segment_shared_for_one_or_two_frames_is_no_merge(n_merge: int, fused_steps: int, merges: int) -> None:
+    """B7 rule 1 confirmed over n_merge = N_confirm = 3 frames: two walkers 1 m apart (each finds only its own
+    detection) seen as one segment between them for ``fused_steps`` frames. One or two frames of a fused segment is
+    no merge (the measurement truth asks N_confirm frames of any state; the walkers are correlated then, B7 rule 3's
+    completion), a second of it is one merge and, when they are two segments again, one split. n_merge = 1 (B7 as
+    written, the default): one frame is a merge, and a split once they are apart again."""
     rng = np.random.default_rng(3)
-    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0)
+    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0, n_merge=n_merge)
     n = 4 * 25
     pos, feet = _parallel_walkers(n, 1.0)
     events, situations = [], []
