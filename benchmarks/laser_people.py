@@ -54,6 +54,7 @@ from fusiontrack.sim.simulator import Simulation, simulate
 from fusiontrack.sim.situations import (
     EVENT_KINDS,
     TRUTH_PERSISTENCE,
+    bridge_correlated,
     drop_undone_splits,
     segment_situation_events,
     situation_events,
@@ -148,7 +149,8 @@ def run_sim(name: str, seconds: float, seed: int, tmp: Path, settings: dict[str,
                     "situations": situation_accuracy([e for e in truth_events if e.t_ns >= t_warm],
                                                      [e for e in events if e.t_ns >= t_warm], id_map=m.id_map)}
         if trk == "pf":  # the same persistence rules on both sides (sim/situations.py TRUTH_PERSISTENCE)
-            held = drop_undone_splits(events, TRUTH_PERSISTENCE["split_hold_s"])
+            held = bridge_correlated(drop_undone_splits(events, TRUTH_PERSISTENCE["split_hold_s"]),
+                                     TRUTH_PERSISTENCE["correlated_gap_s"])
             out[trk]["situations_persist"] = situation_accuracy(
                 [e for e in truth_persist if e.t_ns >= t_warm], [e for e in held if e.t_ns >= t_warm],
                 id_map=m.id_map)

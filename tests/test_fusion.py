@@ -673,7 +673,7 @@ def test_exchange_ids_swaps_two_tracks_from_then_on():
     who = {round(float(s.position_m[0])): s.track_id for s in states}
     assert sorted(who) == [-2, 2]
     a, b = who[-2], who[2]
-    trk._corr[a] = [t, t, np.zeros(2)]  # an open correlated run of a: it follows the id
+    trk._corr[a] = [True, 0, t, [t, t, np.zeros(2)], None]  # an open correlated run of a: it follows the id
     assert trk.exchange_ids(a, b)
     assert trk._corr.keys() == {b}
     states = trk.step(t + 20 * 40_000_000, _standing(t + 20 * 40_000_000, (-2.0, 2.0)))

@@ -9,7 +9,13 @@ import numpy as np
 import pytest
 
 from fusiontrack.sim.model import KIND_PERSON, AgentSnapshot
-from fusiontrack.sim.situations import drop_undone_splits, label_situations, situation_counts, situation_events
+from fusiontrack.sim.situations import (
+    bridge_correlated,
+    drop_undone_splits,
+    label_situations,
+    situation_counts,
+    situation_events,
+)
 from fusiontrack.types import GroundTruth, Situation
 
 BOUNDS = (-10.0, -10.0, 10.0, 10.0)
@@ -218,3 +224,19 @@ def test_a_merge_ends_a_correlated_run_even_within_the_gap() -> None:
     corr = sorted((e.t_ns // DT_NS, e.t_end_ns // DT_NS) for e in situation_events(frames, BOUNDS, correlated_gap_s=1.0)
                   if e.kind == "correlated" and e.track_ids == (1,))
     assert corr == [(0, 2), (4, 6)]
+
+
+@pytest.mark.parametrize("gap_s", [0.25, 0.3, 1.0])
+def test_bridge_correlated_on_any_event_list_is_the_truths_gap_rule(gap_s: float) -> None:
+    """The tracker's events are bridged after the fact (benchmark 'persistence' row): the same runs as
+    situation_events' own correlated_gap_s, also across a merge (which a bridge never crosses)."""
+    def corr(events):
+        return sorted((e.track_ids, e.t_ns // DT_NS, e.t_end_ns // DT_NS) for e in events if e.kind == "correlated")
+
+    sep = [0.7] * 4 + [2.0] * 2 + [0.7] * 4 + [2.0] * 11 + [0.7] + [0.4] + [0.7] * 3
+    frames = [_snap(k, [1, 2], [[0.0, 0.0], [d, 0.0]]) for k, d in enumerate(sep)]
+    bridged = bridge_correlated(situation_events(frames, BOUNDS), gap_s)
+    assert corr(bridged) == corr(situation_events(frames, BOUNDS, correlated_gap_s=gap_s))
+    assert [e.kind for e in bridged if e.kind != "correlated"] == ["merge", "split"]
+    with pytest.raises(ValueError, match="gap_s"):
+        bridge_correlated([], -1.0)

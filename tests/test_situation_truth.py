@@ -62,6 +62,17 @@ def test_shared_segment_with_someone_who_has_their_own_is_correlated() -> None:
     assert _labels(f) == [C, C]
 
 
+@pytest.mark.parametrize(("third_x_m", "expected"), [(1.0, [C, C, C]), (3.0, [M, M, N])])
+def test_a_shared_segment_merges_only_when_every_gate_holding_it_holds_nothing_else(third_x_m, expected) -> None:
+    # 1 and 2 share segment 0; 3 walks alone at x = third_x_m. At 1.0 m, 3's segment is 0.5 m from 2 (inside
+    # 2's gate of radius 2h = 0.8 m: c_2 = 2) and segment 0 is 0.75 m from 3 (c_3 = 2): B7 rule 1 needs r_j = 2 AND
+    # c_k = 1 for every target that found j, so nobody merges; all three interact (correlated). At 3 m: a merge.
+    f = _frame(0, [1, 2, 3], [[0, 0], [0.5, 0], [third_x_m, 0]], [[0.25, 0], [third_x_m, 0]], [[6, 5, 0], [0, 0, 8]])
+    assert _labels(f) == expected
+    old = list(segment_situations([f], BOUNDS, gate_merges=False).labels[0])
+    assert old == [M, M, C if third_x_m < 2 else N]  # membership alone, before: merged whatever the gate held
+
+
 @pytest.mark.parametrize(("gap_m", "expected"), [(0.6, C), (1.5, N)])
 def test_gate_of_radius_2h_about_the_true_centre(gap_m: float, expected: Situation) -> None:
     f = _frame(0, [1, 2], [[0, 0], [gap_m, 0]], [[0, 0], [gap_m, 0]], [[8, 0], [0, 8]])

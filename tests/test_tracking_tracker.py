@@ -179,6 +179,26 @@ def test_a_walker_first_seen_a_metre_inside_came_in_from_the_edge(latency_s, kin
     assert [e.kind for e in events] == kinds
 
 
+@pytest.mark.parametrize(("glimpse_s", "kinds"), [(0.0, ["born"]), (5.0, ["appear"])])
+def test_a_walker_glimpsed_on_the_edge_then_hidden_appears(glimpse_s, kinds) -> None:
+    """Entering at x = 0.1 m at 1.3 m/s: seen in two scans on the edge (too few to confirm), hidden behind the door
+    frame until 2 m in. The measurement truth dates its appear by that glimpse; with the glimpse remembered the
+    tracker does too (appear, dated and placed by the glimpse), without it the walker is born inside."""
+    rng = np.random.default_rng(4)
+    trk = LaserPeopleTracker({"glimpse_s": glimpse_s}, area_m=(0.0, 0.0, 10.0, 4.0), rng=0)
+    n = 3 * 25
+    pos, feet = _walk(n, np.array([0.1, 2.0]), np.zeros(n), 1.3, 1.4)
+    events = []
+    for k in range(n):
+        seen = k < 2 or pos[k, 0] >= 2.0
+        trk.step(k * FRAME_NS, [_detection(k * FRAME_NS, feet[k], rng)] if seen else [])
+        events += trk.events
+    assert [e.kind for e in events] == kinds
+    if kinds == ["appear"]:
+        assert events[0].t_ns == 0
+        assert events[0].position_m[0] < 0.5
+
+
 def test_parameters_are_validated_by_name() -> None:
     with pytest.raises(ConfigError, match="n_particles"):
         TrackerParams(n_particles=0)
@@ -230,6 +250,83 @@ def test_two_walkers_meet_walk_together_and_separate_keep_their_identities() -> 
     assert after == before  # identities recovered by motion at the split
     merges = [e for e in events if e.kind == "merge"]
     assert set(merges[0].track_ids) == set(before)
+
+
+def _parallel_walkers(n: int, gap_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Two walkers side by side along +x, ``gap_m`` apart (y = 5 -/+ gap/2): positions (2, n, 2), feet (2, n, 2, 2)."""
+    pos, feet = [], []
+    for k, y in enumerate((5.0 - gap_m / 2, 5.0 + gap_m / 2)):
+        p, f = _walk(n, np.array([2.0, y]), np.zeros(n), 1.2, 1.4, phase0=1.7 * k)
+        pos.append(p)
+        feet.append(f)
+    return np.array(pos), np.array(feet)
+
+
+def _fused(t_ns: int, pos: np.ndarray) -> Detection:
+    """One segment holding both walkers (their inner feet), centred between them."""
+    mid = pos.mean(axis=0)
+    off = np.array([0.0, 0.2])
+    f = np.array([mid - off, mid + off])
+    return Detection(t_ns, "laser", position_m=mid, features={
+        "feet_m": f, "inter_feet_m": np.asarray(0.4), "one_foot": np.asarray(False)})
+
+
+@pytest.mark.parametrize(("n_merge", "fused_steps", "merges"), [(3, 1, 0), (3, 2, 0), (3, 25, 1), (1, 1, 1)])
+def test_a_segment_shared_for_one_or_two_frames_is_no_merge(n_merge: int, fused_steps: int, merges: int) -> None:
+    """B7 rule 1 confirmed over n_merge = N_confirm = 3 frames: two walkers 1 m apart (each finds only its own
+    detection) seen as one segment between them for ``fused_steps`` frames. One or two frames of a fused segment is
+    no merge (the measurement truth asks N_confirm frames of any state; the walkers are correlated then, B7 rule 3's
+    completion), a second of it is one merge and, when they are two segments again, one split. n_merge = 1 (B7 as
+    written, the default): one frame is a merge, and a split once they are apart again."""
+    rng = np.random.default_rng(3)
+    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0, n_merge=n_merge)
+    n = 4 * 25
+    pos, feet = _parallel_walkers(n, 1.0)
+    events, situations = [], []
+    for k in range(n):
+        t_ns = k * FRAME_NS
+        fused = 40 <= k < 40 + fused_steps
+        dets = [_fused(t_ns, pos[:, k])] if fused else [_detection(t_ns, feet[w, k], rng) for w in (0, 1)]
+        states = trk.step(t_ns, dets)
+        events += trk.events
+        if fused:
+            situations.append({s.situation for s in states})
+    events += trk.finish()
+    kinds = [e.kind for e in events]
+    assert kinds.count("merge") == merges
+    assert kinds.count("split") == merges
+    if merges == 0:
+        assert situations == [{Situation.CORRELATED}] * fused_steps
+    assert {s.track_id for s in trk.step(n * FRAME_NS, [])} == {1, 2}  # the same two identities throughout
+
+
+def test_correlated_runs_change_state_after_n_confirm_frames() -> None:
+    """A walker passes a second, standing person 0.6 m to its side (in its gate: correlated, B7 rule 3) for 2 s,
+    the bystander's segment missing in one scan every 0.2 s; before and after, a clutter detection flashes 0.5 m
+    away for one scan every 0.5 s. The correlated state changes only when the other label holds N_confirm frames
+    (the measurement truth's rule): one run while they pass, none for the one-scan flashes."""
+    rng = np.random.default_rng(6)
+    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0, n_confirm_interior=1000)  # no interior births
+    n = 8 * 25
+    _, feet = _walk(n, np.array([0.2, 5.0]), np.zeros(n), 1.0, 1.3)  # enters at the edge: a track at once
+    stand = np.array([[4.2, 5.5], [4.2, 5.7]])  # the bystander's feet, 0.6 m to the walker's left at x = 4.2
+    events = []
+    for k in range(n):
+        t_ns = k * FRAME_NS
+        dets = [_detection(t_ns, feet[k], rng)]
+        t = k * FRAME_NS / 1e9
+        if 2.5 <= t < 5.5 and k % 5 != 0:  # within 1.5 m along x of the bystander's line
+            dets.append(_detection(t_ns, stand, rng))
+        elif k % 12 == 6:
+            dets.append(_detection(t_ns, feet[k] + [0.0, -0.5], rng))
+        trk.step(t_ns, dets)
+        events += trk.events
+    events += trk.finish()
+    walker = [e for e in events if e.kind == "correlated" and e.track_ids == (1,)]
+    assert len(walker) == 1
+    # in the gate (radius 0.8 m) while the walker is within 0.53 m along x of the bystander: t = 3.5 .. 4.5 s
+    assert 3.3 <= walker[0].t_ns / 1e9 <= 3.7
+    assert 4.3 <= walker[0].t_end_ns / 1e9 <= 4.7
 
 
 # ---- bad sensor data -----------------------------------------------------------------------------------------

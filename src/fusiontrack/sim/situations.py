@@ -67,9 +67,12 @@ that hit that agent (noise-free cast of the simulator: exact attribution, no dis
   (B4's ``n_min``: as many as a segment of its own needs); ``a`` is *seen* when it is a member of a segment,
   *hidden* otherwise (occluded, out of reach, or not yet separated from the background), and has a segment of
   its *own* when some segment has it as the only member;
-* ``merged`` — seen, no segment of its own, and sharing a segment with another such agent. Merged sets are the
-  connected components of "share a segment" among those agents (B7 rule 1: ``r_j = 2`` and every target
-  finding ``j`` has ``c = 1``: each member's only detection is the shared one);
+* ``merged`` — seen, no segment of its own, and sharing a segment with another such agent, when no agent whose
+  gate (below) holds that segment's centre has a second segment with members in its gate. Merged sets are the
+  connected components of "share such a segment" among those agents (B7 rule 1: ``r_j = 2`` and every target
+  finding ``j`` has ``c = 1``; B6 counts in ``c`` every detection in the target's gate, so a pair sharing a
+  segment next to a third person's segment, within ``2h``, interacts — correlated — and does not merge;
+  ``gate_merges=False`` drops this condition: membership alone, as before);
 * ``correlated`` — seen, not merged, and either (a) a member of a segment shared with someone (the other has a
   segment of its own: its target finds two detections, ``c = 2``, B7 rule 3 and its completion in
   :mod:`fusiontrack.tracking.situations`), or (b) B6's gate about its true centre (circle of radius
@@ -143,6 +146,7 @@ __all__ = [
     "TRUTH_PERSISTENCE",
     "SegmentAnalysis",
     "SegmentFrame",
+    "bridge_correlated",
     "drop_undone_splits",
     "label_situations",
     "load_laser_hits",
@@ -160,10 +164,10 @@ EVENT_MERGE, EVENT_SPLIT, EVENT_CORRELATED, EVENT_APPEAR, EVENT_DISAPPEAR = (
 EVENT_KINDS = (EVENT_MERGE, EVENT_SPLIT, EVENT_CORRELATED, EVENT_APPEAR, EVENT_DISAPPEAR)
 
 TRUTH_PERSISTENCE = {"split_hold_s": 0.5, "correlated_gap_s": 0.4}
-"""The persistence rules benchmarks/laser_people.py applies to both sides in its second situation table:
-``correlated_gap_s`` is the tracker's own default; ``split_hold_s = 0.5 s`` is applied to the truth here and
-to the tracker's events with :func:`drop_undone_splits` (groups walk ~0.5-0.6 m apart, at ``d_merged``, and
-both their one/two-segment look and their centre distance cross it back and forth)."""
+"""The persistence rules benchmarks/laser_people.py applies to both sides in its second situation table: to the
+truth here, and to the tracker's events with :func:`drop_undone_splits` and :func:`bridge_correlated` (groups walk
+~0.5-0.6 m apart, at ``d_merged``, and both their one/two-segment look and their centre distance cross it back and
+forth)."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -434,7 +438,7 @@ def load_laser_hits(recording: Any) -> dict[str, dict[str, np.ndarray]]:
 
 def segment_situations(frames: Sequence[SegmentFrame], bounds_m: Any, *, min_returns: int = 3,
                        gate_m: float = 0.8, edge_m: float = 0.5, appear_window_s: float = 1.0,
-                       min_state_s: float = 0.1) -> SegmentAnalysis:
+                       min_state_s: float = 0.1, gate_merges: bool = True) -> SegmentAnalysis:
     """Seed 001's situation of every listed agent in every frame, from the measurement truth.
 
     Parameters
@@ -453,26 +457,30 @@ def segment_situations(frames: Sequence[SegmentFrame], bounds_m: Any, *, min_ret
         How long after an appear event (before a disappear event) an agent is appearing (disappearing), s.
     min_state_s : float
         Shortest sighting (consecutive frames in which the agent is seen) that confirms an appear, s.
+    gate_merges : bool
+        B7 rule 1's ``c = 1`` for every target whose gate holds the shared segment (module docstring); False:
+        sharing a segment is enough.
 
     Returns
     -------
     SegmentAnalysis
     """
-    return _segment_analysis(frames, bounds_m, min_returns, gate_m, edge_m, appear_window_s, min_state_s)[0]
+    return _segment_analysis(frames, bounds_m, min_returns, gate_m, edge_m, appear_window_s, min_state_s,
+                             gate_merges)[0]
 
 
 def segment_situation_events(frames: Sequence[SegmentFrame], bounds_m: Any, *, min_returns: int = 3,
                              gate_m: float = 0.8, edge_m: float = 0.5, appear_window_s: float = 1.0,
                              max_gap_s: float = 1.0, min_state_s: float = 0.1, sensor: str = "ground_truth",
                              split_hold_s: float = 0.0, correlated_gap_s: float = 0.0,
-                             min_correlated_s: float = 0.0) -> list[Event]:
+                             min_correlated_s: float = 0.0, gate_merges: bool = True) -> list[Event]:
     """Seed 001's situation events from the measurement truth (module docstring, "Measurement truth").
 
     Parameters are those of :func:`segment_situations`, plus ``max_gap_s`` (longest time between two frames in
     which a pair, or an agent, is seen for a change of state to count, s), ``min_state_s`` (how long a pair's
     "together" or an agent's correlated / merged / neither state must hold, in every frame it is seen, before it
     counts), ``sensor`` and the persistence rules ``split_hold_s``, ``correlated_gap_s``, ``min_correlated_s``
-    of :func:`situation_events`.
+    of :func:`situation_events`, and ``gate_merges`` (:func:`segment_situations`).
 
     Returns
     -------
@@ -484,7 +492,7 @@ def segment_situation_events(frames: Sequence[SegmentFrame], bounds_m: Any, *, m
     if not min_state_s >= 0:
         raise ValueError(f"min_state_s: expected a value >= 0, got {min_state_s!r}")
     a, appear, disappear = _segment_analysis(frames, bounds_m, min_returns, gate_m, edge_m, appear_window_s,
-                                             min_state_s)
+                                             min_state_s, gate_merges)
     gap_ns = round(max_gap_s * 1e9)
     events: list[Event] = []
     hold_ns = round(min_state_s * 1e9)
@@ -613,7 +621,7 @@ _DisappearRows = list[tuple[int, int, np.ndarray]]
 
 
 def _segment_analysis(frames: Sequence[SegmentFrame], bounds_m: Any, min_returns: int, gate_m: float, edge_m: float,
-                      appear_window_s: float, min_state_s: float
+                      appear_window_s: float, min_state_s: float, gate_merges: bool = True
                       ) -> tuple[SegmentAnalysis, _AppearRows, _DisappearRows]:
     bounds = _check_bounds(bounds_m)
     if isinstance(min_returns, bool) or not isinstance(min_returns, int | np.integer) or min_returns < 1:
@@ -644,6 +652,13 @@ def _segment_analysis(frames: Sequence[SegmentFrame], bounds_m: Any, min_returns
         shared = n_mem >= 2
         cand = seen & ~own
         set_index = np.full(n, -1, np.int64)
+        if len(f.centres_m) and n:
+            gated = (np.linalg.norm(f.positions_m[:, None, :] - f.centres_m[None, :, :], axis=2) < gate_m) \
+                & (n_mem >= 1)[None, :]  # (n, m)
+        else:
+            gated = np.zeros((n, len(f.centres_m)), bool)
+        if gate_merges and shared.any():  # B7 rule 1: every agent whose gate holds the segment has c = 1
+            shared = shared & ~(gated & (gated.sum(axis=1) >= 2)[:, None]).any(axis=0)
         if cand.sum() >= 2 and shared.any():
             m_c = member[shared][:, cand].astype(np.int64)
             _, comp = connected_components(csr_matrix((m_c.T @ m_c) > 0), directed=False)
@@ -652,14 +667,12 @@ def _segment_analysis(frames: Sequence[SegmentFrame], bounds_m: Any, min_returns
                 idx = np.flatnonzero(cand)[big]
                 set_index[idx] = np.unique(comp[big], return_inverse=True)[1]
         merged = set_index >= 0
-        in_shared = (member & shared[:, None]).any(axis=0)
+        in_shared = (member & (n_mem >= 2)[:, None]).any(axis=0)
         if len(f.centres_m) and n:
-            gated = (np.linalg.norm(f.positions_m[:, None, :] - f.centres_m[None, :, :], axis=2) < gate_m) \
-                & (n_mem >= 1)[None, :]  # (n, m)
             holds_other = (n_mem[None, :] - member.T) >= 1  # (n, m)
             by_gate = (gated.sum(axis=1) >= 2) & (gated & holds_other).any(axis=1)
             # partners: members of the segments in the gate and of the shared segments one is a member of
-            touch = gated | (member.T & shared[None, :])
+            touch = gated | (member.T & (n_mem >= 2)[None, :])
             near = (touch.astype(np.int64) @ member.astype(np.int64)) > 0  # (n, n)
             np.fill_diagonal(near, False)
             best = np.argmax(f.returns, axis=0)
@@ -798,6 +811,45 @@ def drop_undone_splits(events: Sequence[Event], hold_s: float) -> list[Event]:
                 dropped.update((i, q))
                 break
     return [e for i, e in enumerate(events) if i not in dropped]
+
+
+def bridge_correlated(events: Sequence[Event], gap_s: float) -> list[Event]:
+    """Join the ``correlated`` events of the same ``track_ids`` whose time spans are at most ``gap_s`` apart, unless a
+    ``merge`` naming one of those ids starts between them (the ``correlated_gap_s`` rule of :func:`situation_events`,
+    for any source of events). The joined event keeps the first one's position and unites the partners.
+
+    Returns all events, sorted by time (stable).
+    """
+    if not gap_s >= 0:
+        raise ValueError(f"gap_s: expected a value >= 0, got {gap_s!r}")
+    gap_ns = round(gap_s * 1e9)
+    events = sorted(events, key=lambda e: e.t_ns)
+    merges: dict[int, list[int]] = {}
+    for e in events:
+        if e.kind == EVENT_MERGE:
+            for i in e.track_ids:
+                merges.setdefault(i, []).append(e.t_ns)
+    out: list[Event] = []
+    open_run: dict[tuple[int, ...], int] = {}  # track_ids -> index in out of the last correlated event
+    for e in events:
+        if e.kind != EVENT_CORRELATED:
+            out.append(e)
+            continue
+        q = open_run.get(e.track_ids)
+        if q is not None:
+            prev = out[q]
+            end = prev.t_end_ns if prev.t_end_ns is not None else prev.t_ns
+            merged_between = any(end <= t <= e.t_ns for i in e.track_ids for t in merges.get(i, ()))
+            if e.t_ns - end <= gap_ns and not merged_between:
+                partners = set(prev.attributes.get("partners", ())) | set(e.attributes.get("partners", ()))
+                last = None if e.t_end_ns is None or prev.t_end_ns is None else max(prev.t_end_ns, e.t_end_ns)
+                attrs = {**prev.attributes, "partners": tuple(sorted(partners))} if partners else prev.attributes
+                out[q] = Event(prev.t_ns, prev.sensor, prev.kind, last, position_m=prev.position_m,
+                               track_ids=prev.track_ids, attributes=attrs)
+                continue
+        open_run[e.track_ids] = len(out)
+        out.append(e)
+    return sorted(out, key=lambda e: e.t_ns)
 
 
 def _correlated_event(agent: int, run: tuple[int, int, set[int], np.ndarray, int], sensor: str) -> Event:
