@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -164,18 +165,24 @@ def test_situations_sensors_and_events_of_a_birth_and_a_death_at_the_edge() -> N
     assert appear.t_end_ns > appear.t_ns
 
 
+def _walker_events(params: dict, x0: float, seen: Callable[[int, float], bool]) -> list:
+    """Events of a walker entering a 10 x 4 m area at ``(x0, 2)`` at 1.3 m/s for 3 s, detected in the scans
+    ``k`` where ``seen(k, x)`` (``x``: its position along the way)."""
+    rng = np.random.default_rng(4)
+    trk = LaserPeopleTracker(params, area_m=(0.0, 0.0, 10.0, 4.0), rng=0)
+    n = 3 * 25
+    pos, feet = _walk(n, np.array([x0, 2.0]), np.zeros(n), 1.3, 1.4)
+    events = []
+    for k in range(n):
+        trk.step(k * FRAME_NS, [_detection(k * FRAME_NS, feet[k], rng)] if seen(k, pos[k, 0]) else [])
+        events += trk.events
+    return events
+
+
 @pytest.mark.parametrize(("latency_s", "kinds"), [(0.0, ["born"]), (0.75, ["appear"])])
 def test_a_walker_first_seen_a_metre_inside_came_in_from_the_edge(latency_s, kinds) -> None:
     """Entering at x = 0 at 1.3 m/s but hidden for its first 0.7 s: first seen 0.9 m in, heading inwards."""
-    rng = np.random.default_rng(4)
-    trk = LaserPeopleTracker({"appear_latency_s": latency_s}, area_m=(0.0, 0.0, 10.0, 4.0), rng=0)
-    n = 3 * 25
-    pos, feet = _walk(n, np.array([0.0, 2.0]), np.zeros(n), 1.3, 1.4)
-    events = []
-    for k in range(n):
-        seen = pos[k, 0] >= 0.9
-        trk.step(k * FRAME_NS, [_detection(k * FRAME_NS, feet[k], rng)] if seen else [])
-        events += trk.events
+    events = _walker_events({"appear_latency_s": latency_s}, 0.0, lambda k, x: x >= 0.9)
     assert [e.kind for e in events] == kinds
 
 
@@ -184,15 +191,7 @@ def test_a_walker_glimpsed_on_the_edge_then_hidden_appears(glimpse_s, kinds) -> 
     """Entering at x = 0.1 m at 1.3 m/s: seen in two scans on the edge (too few to confirm), hidden behind the door
     frame until 2 m in. The measurement truth dates its appear by that glimpse; with the glimpse remembered the
     tracker does too (appear, dated and placed by the glimpse), without it the walker is born inside."""
-    rng = np.random.default_rng(4)
-    trk = LaserPeopleTracker({"glimpse_s": glimpse_s}, area_m=(0.0, 0.0, 10.0, 4.0), rng=0)
-    n = 3 * 25
-    pos, feet = _walk(n, np.array([0.1, 2.0]), np.zeros(n), 1.3, 1.4)
-    events = []
-    for k in range(n):
-        seen = k < 2 or pos[k, 0] >= 2.0
-        trk.step(k * FRAME_NS, [_detection(k * FRAME_NS, feet[k], rng)] if seen else [])
-        events += trk.events
+    events = _walker_events({"glimpse_s": glimpse_s}, 0.1, lambda k, x: k < 2 or x >= 2.0)
     assert [e.kind for e in events] == kinds
     if kinds == ["appear"]:
         assert events[0].t_ns == 0
