@@ -9,8 +9,10 @@ Tables, all measured in this process, one run after another (no parallel load on
    the median / p95 time per scan of the tracker step alone and of detector + tracker;
 2. situation detection of the PF tracker against the simulator's truth events
    (:func:`fusiontrack.sim.situations.situation_events`, scored by :func:`fusiontrack.eval.situation_accuracy`
-   with the identity map of the MOTA evaluation): per kind, true events, detected, false alarms; events
-   (true and detected) that start in the first 3 s, while every track is being born, are left out. Against two
+   with the tracks' identities of the MOTA evaluation, frame by frame: :func:`fusiontrack.eval.frame_matches`, so
+   a detected event names the people its tracks followed at that time): per kind, true events, detected, false
+   alarms; events (true and detected) that start in the first 3 s, while every track is being born, are left
+   out. Against two
    truths: the *centre-distance* truth (:func:`~fusiontrack.sim.situations.situation_events`: merged below
    0.6 m, correlated below 0.8 m between true body centres) and the *measurement* truth
    (:func:`~fusiontrack.sim.situations.segment_situation_events` on
@@ -49,7 +51,7 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from fusiontrack.eval import evaluate_floor, situation_accuracy
+from fusiontrack.eval import evaluate_floor, frame_matches, situation_accuracy
 from fusiontrack.eval.situations import segment_frames
 from fusiontrack.io.recording import Recording
 from fusiontrack.io.sync import synchronize, with_time
@@ -154,20 +156,21 @@ def run_sim(name: str, seconds: float, seed: int, tmp: Path, settings: dict[str,
         m = evaluate_floor(gt, states, 0.5)
         warm = evaluate_floor([g for g in gt if g.t_ns >= t_warm], [s for s in states if s.t_ns >= t_warm - 20_000_000],
                               0.5)
+        fm = frame_matches(gt, states, 0.5)  # who each track followed when (MOTA's matching), for the situations
         out[trk] = {"m": m, "warm": warm, "track_ms": track_ms, "total_ms": total_ms,
                     # Events start counting after the warm-up too: every track is born in the first scans (not
                     # on the edge: no "appear"), and the truth has no events for those who are there from the start.
                     "situations": situation_accuracy([e for e in truth_events if e.t_ns >= t_warm],
-                                                     [e for e in events if e.t_ns >= t_warm], id_map=m.id_map)}
+                                                     [e for e in events if e.t_ns >= t_warm], id_map=fm)}
         if trk == "pf":  # the same persistence rules on both sides (sim/situations.py TRUTH_PERSISTENCE)
             held = bridge_correlated(drop_undone_splits(events, TRUTH_PERSISTENCE["split_hold_s"]),
                                      TRUTH_PERSISTENCE["correlated_gap_s"])
             out[trk]["situations_persist"] = situation_accuracy(
                 [e for e in truth_persist if e.t_ns >= t_warm], [e for e in held if e.t_ns >= t_warm],
-                id_map=m.id_map)
+                id_map=fm)
             for key, truth, det in (("segments", seg_events, events), ("segments_persist", seg_persist, held)):
                 out[trk][key] = situation_accuracy([e for e in truth if e.t_ns >= t_warm],
-                                                   [e for e in det if e.t_ns >= t_warm], id_map=m.id_map)
+                                                   [e for e in det if e.t_ns >= t_warm], id_map=fm)
             out[trk]["events"], out["truth"] = events, {"centre": truth_events, "segments": seg_events}
             out["id_map"] = m.id_map
     return out

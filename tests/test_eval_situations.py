@@ -13,6 +13,7 @@ import pytest
 from fusiontrack.eval import (
     EvaluationError,
     evaluate_floor,
+    frame_matches,
     match_events,
     situation_accuracy,
     situation_table,
@@ -180,6 +181,62 @@ def test_with_simulator_labels_and_the_mot_id_map() -> None:
     scores = situation_accuracy(true, detected, id_map=m.id_map)
     assert (scores["merge"].true, scores["merge"].detected, scores["merge"].false_alarms) == (1, 1, 0)
     assert (scores["split"].true, scores["split"].detected, scores["split"].false_alarms) == (1, 1, 1)
+
+
+def test_frame_matches_name_who_a_track_followed_at_the_time_of_the_event() -> None:
+    """Track 10 follows person 1 for 2 s, then (an identity error) person 2 for 4 s; track 20 the other way round.
+    The whole-run identity map (IDF1's) gives track 10 to person 2, so track 10's correlated episode in the first
+    2 s cannot match person 1's: a miss and a false alarm for what is an identity error. CLEAR's frame-by-frame
+    matches name person 1 then, and the episode is detected."""
+    dt = S // 10
+    frames, states = [], []
+    for k in range(60):
+        xy = np.array([[float(k) * 0.1, 2.0], [float(k) * 0.1, 2.6]])  # side by side, 0.6 m apart
+        frames.append(GroundTruth(t_ns=T0 + k * dt, sensor="sim", frame_id="world", ids=[1, 2], positions_m=xy))
+        ids = (10, 20) if k < 20 else (20, 10)
+        states += [TrackState(t_ns=T0 + k * dt, sensor="tracker", track_id=tid, position_m=p)
+                   for tid, p in zip(ids, xy, strict=True)]
+    m = evaluate_floor(frames, states)
+    assert dict(m.id_map) == {10: 2, 20: 1}
+    fm = frame_matches(frames, states)
+    assert fm.n_matches == m.tp == 120
+    assert (fm.gt_id(10, T0 + 5 * dt), fm.gt_id(10, T0 + 40 * dt), fm.gt_id(99, T0)) == (1, 2, None)
+    true = [ev("correlated", 0.5, (1,), 1.5, sensor="ground_truth")]
+    detected = [ev("correlated", 0.6, (10,), 1.4)]
+    whole = situation_accuracy(true, detected, id_map=m.id_map)["correlated"]
+    assert (whole.detected, whole.false_alarms) == (0, 1)
+    local = situation_accuracy(true, detected, id_map=fm)["correlated"]
+    assert (local.detected, local.false_alarms) == (1, 0)
+    # a detection of the other person at that time still does not match
+    other = situation_accuracy(true, [ev("correlated", 0.6, (20,), 1.4)], id_map=fm)["correlated"]
+    assert (other.detected, other.false_alarms) == (0, 1)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_frame_matches_are_trackevals_clear_matches(seed: int) -> None:
+    """Random crowds with noisy, swapping and missing tracks: as many matches as TrackEval's CLEAR TP, and the
+    ID switches counted from them by CLEAR's rule equal its IDSW."""
+    rng = np.random.default_rng(seed)
+    n_t, n = 50, 5
+    xy = np.cumsum(rng.normal(0, 0.15, (n_t, n, 2)), axis=0) + rng.uniform(0, 2, (1, n, 2))
+    frames, states = [], []
+    for k in range(n_t):
+        frames.append(GroundTruth(t_ns=T0 + k * S // 10, sensor="sim", frame_id="world", ids=np.arange(n),
+                                  positions_m=xy[k]))
+        ids = rng.permutation(n) + 100 if rng.random() < 0.05 else np.arange(n) + 100
+        states += [TrackState(t_ns=T0 + k * S // 10, sensor="tracker", track_id=int(tid),
+                              position_m=xy[k, j] + rng.normal(0, 0.25, 2))
+                   for j, tid in enumerate(ids) if rng.random() > 0.1]
+    m = evaluate_floor(frames, states)
+    fm = frame_matches(frames, states)
+    assert fm.n_matches == m.tp
+    last: dict[int, int] = {}
+    idsw = 0
+    for frame in fm.matches:
+        idsw += sum(1 for tid, g in frame.items() if g in last and last[g] != tid)
+        last.update({g: tid for tid, g in frame.items()})
+    assert idsw == m.id_switches
+    assert m.id_switches > 0
 
 
 def test_situation_table() -> None:

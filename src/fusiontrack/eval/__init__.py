@@ -8,6 +8,7 @@ from .errors import EvaluationError
 from .mot import (
     MOT16_DISTRACTOR_CLASSES,
     MOT20_DISTRACTOR_CLASSES,
+    FrameMatches,
     Metrics,
     combine_metrics,
     evaluate_boxes,
@@ -15,6 +16,7 @@ from .mot import (
     evaluate_floor,
     evaluate_mot_files,
     floor_similarity,
+    frame_matches,
     metrics_table,
 )
 from .situations import SituationScore, match_events, situation_accuracy, situation_table
@@ -23,6 +25,7 @@ __all__ = [
     "MOT16_DISTRACTOR_CLASSES",
     "MOT20_DISTRACTOR_CLASSES",
     "EvaluationError",
+    "FrameMatches",
     "Metrics",
     "SituationScore",
     "combine_metrics",
@@ -31,6 +34,7 @@ __all__ = [
     "evaluate_floor",
     "evaluate_mot_files",
     "floor_similarity",
+    "frame_matches",
     "match_events",
     "metrics_table",
     "situation_accuracy",

@@ -98,6 +98,7 @@ if TYPE_CHECKING:
 __all__ = [
     "MOT16_DISTRACTOR_CLASSES",
     "MOT20_DISTRACTOR_CLASSES",
+    "FrameMatches",
     "Metrics",
     "combine_metrics",
     "evaluate_boxes",
@@ -105,6 +106,7 @@ __all__ = [
     "evaluate_floor",
     "evaluate_mot_files",
     "floor_similarity",
+    "frame_matches",
     "metrics_table",
 ]
 
@@ -525,6 +527,87 @@ def evaluate_floor(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Trac
         raise EvaluationError(f"threshold_m: expected a finite distance > 0 m, got {threshold_m!r}")
     seq = _floor_sequence(gt, tracks, float(threshold_m), _class_filter(classes), time_tolerance_ns, name)
     return _evaluate(seq, _MATCH_SIMILARITY, distance_scale_m=2.0 * float(threshold_m))
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class FrameMatches:
+    """CLEAR's matches of every ground-truth frame: which track stood for which object, frame by frame.
+
+    The matching of TrackEval's CLEAR (the MOTA matching): per frame, the Hungarian algorithm on the similarity
+    with a bonus for the pairs matched in the previous frame, pairs within the match threshold only. Unlike
+    :attr:`Metrics.id_map` (one ground-truth id per track for the whole sequence, the IDF1 correspondence), a track
+    that follows one person, then another, maps to each in turn.
+
+    Attributes
+    ----------
+    t_ns : (n_frames,) int64
+        The ground-truth frame times, ascending.
+    matches : tuple of dict of int -> int
+        Per frame, track id -> ground-truth id (original ids).
+    """
+
+    t_ns: np.ndarray
+    matches: tuple[dict[int, int], ...]
+
+    @property
+    def n_matches(self) -> int:
+        """All matches summed over frames (CLEAR's TP)."""
+        return sum(len(m) for m in self.matches)
+
+    def gt_id(self, track_id: int, t_ns: int, t_end_ns: int | None = None) -> int | None:
+        """The object ``track_id`` was matched to in the frame nearest ``t_ns``; with ``t_end_ns``, in the first frame
+        of ``[t_ns, t_end_ns]`` in which it was matched. None when it was matched to nothing then."""
+        if not len(self.t_ns):
+            return None
+        k = int(np.clip(np.searchsorted(self.t_ns, t_ns), 0, len(self.t_ns) - 1))
+        if k > 0 and abs(int(self.t_ns[k - 1]) - t_ns) <= abs(int(self.t_ns[k]) - t_ns):
+            k -= 1
+        hit = self.matches[k].get(int(track_id))
+        if hit is not None or t_end_ns is None:
+            return hit
+        for j in range(k + 1, int(np.searchsorted(self.t_ns, t_end_ns, side="right"))):
+            hit = self.matches[j].get(int(track_id))
+            if hit is not None:
+                return hit
+        return None
+
+
+def _clear_matches(seq: _Sequence, threshold: float) -> list[dict[int, int]]:
+    """Per timestep, CLEAR's matches in original ids (TrackEval's ``CLEAR.eval_sequence`` matching, written out:
+    TrackEval keeps the matches to itself)."""
+    out: list[dict[int, int]] = []
+    prev: dict[int, int] = {}  # gt id -> track id matched in the previous timestep
+    for g, t, s in zip(seq.gt_ids, seq.tracker_ids, seq.similarity, strict=True):
+        sim = np.asarray(s, dtype=np.float64).reshape(g.size, t.size)
+        if not g.size or not t.size:  # (TrackEval skips the timestep: the previous matches stay)
+            out.append({})
+            continue
+        had = np.array([int(gi) in prev for gi in g.tolist()])
+        before = np.array([prev.get(int(gi), 0) for gi in g.tolist()], dtype=np.int64)
+        cont = had[:, None] & (before[:, None] == t[None, :])
+        score = 1000.0 * cont + sim
+        score[sim < threshold - _EPS] = 0.0
+        rows, cols = linear_sum_assignment(-score)
+        ok = score[rows, cols] > _EPS
+        frame = {int(t[c]): int(g[r]) for r, c in zip(rows[ok], cols[ok], strict=True)}
+        out.append(frame)
+        prev = {gi: ti for ti, gi in frame.items()}
+    return out
+
+
+def frame_matches(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Track], threshold_m: float = 0.5,
+                  classes: Iterable[str] | None = ("person",), time_tolerance_ns: int | None = None) -> FrameMatches:
+    """CLEAR's frame-by-frame matches of floor-plane tracks to ground truth (parameters as :func:`evaluate_floor`,
+    whose MOTA counts these matches: their number is its ``tp``).
+
+    Situation-detection scoring (:func:`fusiontrack.eval.situation_accuracy`) takes it as ``id_map``: a detected
+    event then names the people its tracks followed at the time of the event.
+    """
+    if not (isinstance(threshold_m, int | float | np.floating) and np.isfinite(threshold_m) and threshold_m > 0):
+        raise EvaluationError(f"threshold_m: expected a finite distance > 0 m, got {threshold_m!r}")
+    seq = _floor_sequence(gt, tracks, float(threshold_m), _class_filter(classes), time_tolerance_ns, "floor")
+    t_ns = np.array(sorted(f.t_ns for f in gt), dtype=np.int64)
+    return FrameMatches(t_ns, tuple(_clear_matches(seq, _MATCH_SIMILARITY)))
 
 
 # --------------------------------------------------------------------------------------------------

@@ -15,11 +15,15 @@ A detection ``d`` may match a true event ``e`` when all of these hold:
   a detection inside a true correlated episode, or a tracker's appear/disappear anywhere in the true
   event's window (``appear``: entry .. entry + 1 s; ``disappear``: up to 1 s before the exit .. exit),
   matches. ``t_end_ns = None`` (still going on) extends to the end of time;
-* identities, when ``id_map`` (tracker id -> ground-truth id) is given: the detection's ids mapped to
-  ground-truth ids share at least one with the true event's ``track_ids`` (a detection none of whose
-  ids maps to anything cannot match). Use :attr:`fusiontrack.eval.mot.Metrics.id_map` from
-  :func:`~fusiontrack.eval.mot.evaluate_floor` on the same run, or ``{i: i for i in ...}`` when the
-  detector reports ground-truth ids;
+* identities, when ``id_map`` is given: the detection's ids mapped to ground-truth ids share at least one
+  with the true event's ``track_ids`` (a detection none of whose ids maps to anything cannot match).
+  ``id_map`` is either :func:`~fusiontrack.eval.mot.frame_matches` of the same run (CLEAR's frame-by-frame
+  matches: each track maps to the person it followed at the time of the event, in the frame nearest its
+  start, or the first frame of its span in which it was matched), or one tracker id -> ground-truth id for the
+  whole run (:attr:`fusiontrack.eval.mot.Metrics.id_map`, the IDF1 correspondence; or ``{i: i for i in ...}``
+  when the detector reports ground-truth ids). With the whole-run map, an event of a track that followed
+  two people in turn can only match events of the person it followed longer: an identity error, which IDF1
+  and the ID switches count already, then also counts as a missed situation and a false alarm;
 * position, only without ``id_map`` and only when both events have ``position_m``: within
   ``position_tolerance_m`` (default 1 m); otherwise time alone decides.
 
@@ -45,6 +49,7 @@ from scipy.optimize import linear_sum_assignment
 from ..sim.situations import EVENT_KINDS, SegmentFrame, load_laser_hits
 from ..types import Event
 from .errors import EvaluationError
+from .mot import FrameMatches
 
 if TYPE_CHECKING:
     from rich.table import Table
@@ -120,7 +125,8 @@ def _incidence(id_lists: Sequence[Sequence[int]], universe: np.ndarray) -> np.nd
     return out
 
 
-def _allowed(true: Sequence[Event], det: Sequence[Event], time_tolerance_ns: int, id_map: Mapping[int, int] | None,
+def _allowed(true: Sequence[Event], det: Sequence[Event], time_tolerance_ns: int,
+             id_map: Mapping[int, int] | FrameMatches | None,
              position_tolerance_m: float) -> tuple[np.ndarray, np.ndarray]:
     """``(n_true, n_det)`` bool of allowed pairs and ``(n_true, n_det)`` start-time offsets in ns (int64)."""
     t_start, t_end = _spans(true)
@@ -131,7 +137,11 @@ def _allowed(true: Sequence[Event], det: Sequence[Event], time_tolerance_ns: int
     offset = np.abs(t_start[:, None] - d_start[None, :])
     if id_map is not None:
         true_ids = [e.track_ids for e in true]
-        det_ids = [tuple(id_map[i] for i in e.track_ids if i in id_map) for e in det]
+        if isinstance(id_map, FrameMatches):  # the people the tracks followed at the time of the event
+            det_ids = [tuple(g for i in e.track_ids if (g := id_map.gt_id(i, e.t_ns, e.t_end_ns)) is not None)
+                       for e in det]
+        else:
+            det_ids = [tuple(id_map[i] for i in e.track_ids if i in id_map) for e in det]
         universe = np.unique(np.fromiter((i for ids in (*true_ids, *det_ids) for i in ids), dtype=np.int64))
         ok &= (_incidence(true_ids, universe) @ _incidence(det_ids, universe).T) > 0
     else:
@@ -141,7 +151,7 @@ def _allowed(true: Sequence[Event], det: Sequence[Event], time_tolerance_ns: int
 
 
 def match_events(true_events: Sequence[Event], detected_events: Sequence[Event], *,
-                 time_tolerance_ns: int = 1_000_000_000, id_map: Mapping[int, int] | None = None,
+                 time_tolerance_ns: int = 1_000_000_000, id_map: Mapping[int, int] | FrameMatches | None = None,
                  position_tolerance_m: float = 1.0) -> list[tuple[int, int]]:
     """One-to-one matches between true and detected events of the same kind (rules in the module docstring).
 
@@ -150,8 +160,8 @@ def match_events(true_events: Sequence[Event], detected_events: Sequence[Event],
     true_events, detected_events : sequence of Event
     time_tolerance_ns : int
         Largest gap between the two events' time spans, ns.
-    id_map : mapping of int -> int, optional
-        Tracker id -> ground-truth id; when given, matched events must share an identity.
+    id_map : FrameMatches or mapping of int -> int, optional
+        Tracker ids -> ground-truth ids (module docstring); when given, matched events must share an identity.
     position_tolerance_m : float
         Largest distance between the events' positions (without ``id_map``, when both have one), m.
 
@@ -180,7 +190,7 @@ def match_events(true_events: Sequence[Event], detected_events: Sequence[Event],
 
 def situation_accuracy(true_events: Iterable[Event], detected_events: Iterable[Event], *,
                        kinds: Sequence[str] = EVENT_KINDS, time_tolerance_ns: int = 1_000_000_000,
-                       id_map: Mapping[int, int] | None = None,
+                       id_map: Mapping[int, int] | FrameMatches | None = None,
                        position_tolerance_m: float = 1.0) -> dict[str, SituationScore]:
     """Per kind of situation: true count, detected, false alarms (seed 001 Table II).
 
