@@ -201,6 +201,10 @@ def test_frame_matches_name_who_a_track_followed_at_the_time_of_the_event() -> N
     fm = frame_matches(frames, states)
     assert fm.n_matches == m.tp == 120
     assert (fm.gt_id(10, T0 + 5 * dt), fm.gt_id(10, T0 + 40 * dt), fm.gt_id(99, T0)) == (1, 2, None)
+    # before the track's first state (an appear event dated by the first sighting): the nearest match, if near
+    assert fm.gt_id(10, T0 - 3 * dt) is None
+    assert fm.gt_id(10, T0 - 3 * dt, within_ns=5 * dt) == 1
+    assert fm.gt_id(20, T0 + 80 * dt, within_ns=30 * dt) == 1  # after its last state: its last person
     true = [ev("correlated", 0.5, (1,), 1.5, sensor="ground_truth")]
     detected = [ev("correlated", 0.6, (10,), 1.4)]
     whole = situation_accuracy(true, detected, id_map=m.id_map)["correlated"]

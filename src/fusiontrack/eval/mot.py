@@ -544,32 +544,46 @@ class FrameMatches:
         The ground-truth frame times, ascending.
     matches : tuple of dict of int -> int
         Per frame, track id -> ground-truth id (original ids).
+    by_track : dict of int -> (times (k,) int64, gt ids (k,) int64)
+        The same matches per track, in time order.
     """
 
     t_ns: np.ndarray
     matches: tuple[dict[int, int], ...]
+    by_track: dict[int, tuple[np.ndarray, np.ndarray]]
+
+    @classmethod
+    def from_frames(cls, t_ns: np.ndarray, matches: Sequence[dict[int, int]]) -> FrameMatches:
+        rows: dict[int, list[tuple[int, int]]] = {}
+        for t, frame in zip(np.asarray(t_ns).tolist(), matches, strict=True):
+            for tid, g in frame.items():
+                rows.setdefault(tid, []).append((t, g))
+        by_track = {tid: (np.array([r[0] for r in v], np.int64), np.array([r[1] for r in v], np.int64))
+                    for tid, v in rows.items()}
+        return cls(np.asarray(t_ns, np.int64), tuple(matches), by_track)
 
     @property
     def n_matches(self) -> int:
         """All matches summed over frames (CLEAR's TP)."""
         return sum(len(m) for m in self.matches)
 
-    def gt_id(self, track_id: int, t_ns: int, t_end_ns: int | None = None) -> int | None:
-        """The object ``track_id`` was matched to in the frame nearest ``t_ns``; with ``t_end_ns``, in the first frame
-        of ``[t_ns, t_end_ns]`` in which it was matched. None when it was matched to nothing then."""
-        if not len(self.t_ns):
+    def gt_id(self, track_id: int, t_ns: int, t_end_ns: int | None = None, within_ns: int = 0) -> int | None:
+        """The object ``track_id`` was matched to nearest in time to ``[t_ns, t_end_ns]`` (the earliest match
+        inside it, else the nearest one outside), at most ``within_ns`` away; None without such a match."""
+        hit = self.by_track.get(int(track_id))
+        if hit is None:
             return None
-        k = int(np.clip(np.searchsorted(self.t_ns, t_ns), 0, len(self.t_ns) - 1))
-        if k > 0 and abs(int(self.t_ns[k - 1]) - t_ns) <= abs(int(self.t_ns[k]) - t_ns):
-            k -= 1
-        hit = self.matches[k].get(int(track_id))
-        if hit is not None or t_end_ns is None:
-            return hit
-        for j in range(k + 1, int(np.searchsorted(self.t_ns, t_end_ns, side="right"))):
-            hit = self.matches[j].get(int(track_id))
-            if hit is not None:
-                return hit
-        return None
+        times, ids = hit
+        end = t_ns if t_end_ns is None else max(t_ns, t_end_ns)
+        k = int(np.searchsorted(times, t_ns))  # first match at or after the start
+        if k < times.size and times[k] <= end:
+            return int(ids[k])
+        best, gap = None, within_ns
+        if k < times.size and times[k] - end <= gap:
+            best, gap = int(ids[k]), int(times[k] - end)
+        if k > 0 and t_ns - times[k - 1] <= gap:
+            best = int(ids[k - 1])
+        return best
 
 
 def _clear_matches(seq: _Sequence, threshold: float) -> list[dict[int, int]]:
@@ -607,7 +621,7 @@ def frame_matches(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Track
         raise EvaluationError(f"threshold_m: expected a finite distance > 0 m, got {threshold_m!r}")
     seq = _floor_sequence(gt, tracks, float(threshold_m), _class_filter(classes), time_tolerance_ns, "floor")
     t_ns = np.array(sorted(f.t_ns for f in gt), dtype=np.int64)
-    return FrameMatches(t_ns, tuple(_clear_matches(seq, _MATCH_SIMILARITY)))
+    return FrameMatches.from_frames(t_ns, _clear_matches(seq, _MATCH_SIMILARITY))
 
 
 # --------------------------------------------------------------------------------------------------

@@ -18,8 +18,9 @@ A detection ``d`` may match a true event ``e`` when all of these hold:
 * identities, when ``id_map`` is given: the detection's ids mapped to ground-truth ids share at least one
   with the true event's ``track_ids`` (a detection none of whose ids maps to anything cannot match).
   ``id_map`` is either :func:`~fusiontrack.eval.mot.frame_matches` of the same run (CLEAR's frame-by-frame
-  matches: each track maps to the person it followed at the time of the event, in the frame nearest its
-  start, or the first frame of its span in which it was matched), or one tracker id -> ground-truth id for the
+  matches: each track maps to the person it followed at the time of the event, its first match within the
+  event's span, else its match nearest to it within ``time_tolerance_ns``: a track is not matched yet when
+  its person appears, nor any more once the person has gone), or one tracker id -> ground-truth id for the
   whole run (:attr:`fusiontrack.eval.mot.Metrics.id_map`, the IDF1 correspondence; or ``{i: i for i in ...}``
   when the detector reports ground-truth ids). With the whole-run map, an event of a track that followed
   two people in turn can only match events of the person it followed longer: an identity error, which IDF1
@@ -138,7 +139,8 @@ def _allowed(true: Sequence[Event], det: Sequence[Event], time_tolerance_ns: int
     if id_map is not None:
         true_ids = [e.track_ids for e in true]
         if isinstance(id_map, FrameMatches):  # the people the tracks followed at the time of the event
-            det_ids = [tuple(g for i in e.track_ids if (g := id_map.gt_id(i, e.t_ns, e.t_end_ns)) is not None)
+            det_ids = [tuple(g for i in e.track_ids
+                             if (g := id_map.gt_id(i, e.t_ns, e.t_end_ns, time_tolerance_ns)) is not None)
                        for e in det]
         else:
             det_ids = [tuple(id_map[i] for i in e.track_ids if i in id_map) for e in det]
