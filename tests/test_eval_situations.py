@@ -200,6 +200,8 @@ def test_frame_matches_name_who_a_track_followed_at_the_time_of_the_event() -> N
     assert dict(m.id_map) == {10: 2, 20: 1}
     fm = frame_matches(frames, states)
     assert fm.n_matches == m.tp == 120
+    with pytest.raises(EvaluationError, match="threshold_m"):
+        frame_matches(frames, states, threshold_m=0.0)
     assert (fm.gt_id(10, T0 + 5 * dt), fm.gt_id(10, T0 + 40 * dt), fm.gt_id(99, T0)) == (1, 2, None)
     # before the track's first state (an appear event dated by the first sighting): the nearest match, if near
     assert fm.gt_id(10, T0 - 3 * dt) is None

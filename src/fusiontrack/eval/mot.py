@@ -443,6 +443,13 @@ def _nearest_frame(gt_t: np.ndarray, st_t: np.ndarray, tolerance_ns: int) -> tup
     return frame, dt, dt <= tolerance_ns
 
 
+def _check_threshold(threshold_m: object) -> float:
+    """``threshold_m`` as a float, if a finite distance > 0 m."""
+    if not (isinstance(threshold_m, int | float | np.floating) and np.isfinite(threshold_m) and threshold_m > 0):
+        raise EvaluationError(f"threshold_m: expected a finite distance > 0 m, got {threshold_m!r}")
+    return float(threshold_m)
+
+
 def _floor_sequence(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Track], threshold_m: float,
                     classes: frozenset[str] | None, time_tolerance_ns: int | None, name: str) -> _Sequence:
     frames = sorted(gt, key=lambda f: f.t_ns)
@@ -523,9 +530,7 @@ def evaluate_floor(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Trac
     EvaluationError
         Bad threshold or tolerance, no frames, two frames at one time, two states of one track at one time.
     """
-    if not (isinstance(threshold_m, int | float | np.floating) and np.isfinite(threshold_m) and threshold_m > 0):
-        raise EvaluationError(f"threshold_m: expected a finite distance > 0 m, got {threshold_m!r}")
-    seq = _floor_sequence(gt, tracks, float(threshold_m), _class_filter(classes), time_tolerance_ns, name)
+    seq = _floor_sequence(gt, tracks, _check_threshold(threshold_m), _class_filter(classes), time_tolerance_ns, name)
     return _evaluate(seq, _MATCH_SIMILARITY, distance_scale_m=2.0 * float(threshold_m))
 
 
@@ -617,9 +622,8 @@ def frame_matches(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Track
     Situation-detection scoring (:func:`fusiontrack.eval.situation_accuracy`) takes it as ``id_map``: a detected
     event then names the people its tracks followed at the time of the event.
     """
-    if not (isinstance(threshold_m, int | float | np.floating) and np.isfinite(threshold_m) and threshold_m > 0):
-        raise EvaluationError(f"threshold_m: expected a finite distance > 0 m, got {threshold_m!r}")
-    seq = _floor_sequence(gt, tracks, float(threshold_m), _class_filter(classes), time_tolerance_ns, "floor")
+    seq = _floor_sequence(gt, tracks, _check_threshold(threshold_m), _class_filter(classes), time_tolerance_ns,
+                          "floor")
     t_ns = np.array(sorted(f.t_ns for f in gt), dtype=np.int64)
     return FrameMatches.from_frames(t_ns, _clear_matches(seq, _MATCH_SIMILARITY))
 
