@@ -87,7 +87,7 @@ that hit that agent (noise-free cast of the simulator: exact attribution, no dis
   longer than ``max_gap_s``, has no target); ``occlusion_merges=False`` gives the truth before: hidden agents are
   never merged, and every listed agent's gate counts. A hidden target with ``c = 2`` (between two people) is not
   merged and keeps the hidden label: B7 rule 3 would make its target correlated, but the correlated truth below
-  is about agents' own returns (a tracker sees the hidden person's target coast between the two);
+  labels what agents' own returns show, and it has none;
 * ``correlated`` — seen, not merged, and either (a) a member of a segment shared with someone (the other has a
   segment of its own: its target finds two detections, ``c = 2``, B7 rule 3 and its completion in
   :mod:`fusiontrack.tracking.situations`), or (b) B6's gate about its true centre (circle of radius
@@ -97,8 +97,7 @@ that hit that agent (noise-free cast of the simulator: exact attribution, no dis
 * ``appearing`` — within ``appear_window_s = 1 s`` after an *appear* event of the agent (below);
   ``disappearing`` — within ``appear_window_s`` before a *disappear* event; ``noncorrelated`` otherwise;
   precedence as in the centre-distance truth. Hidden agents get the empty label ``""`` (``merged`` when merged by
-  occlusion). These per-frame
-  labels are raw (what each scan shows); the events below ask states to persist.
+  occlusion). These per-frame labels are raw (what each scan shows); the events below ask states to persist.
 
 Events (the same kinds and :class:`~fusiontrack.types.Event` layout as :func:`situation_events`):
 
@@ -124,7 +123,7 @@ Events (the same kinds and :class:`~fusiontrack.types.Event` layout as :func:`si
     Per agent, over the frames in which it is present, its state (correlated, merged, or neither) changes with
     the same ``min_state_s`` hysteresis and ``max_gap_s`` reset as a pair's; one event per run of the correlated
     state, from its first frame to its last correlated frame (``attributes["partners"]`` = the agents it
-    interacted with). Hidden frames (up to ``max_gap_s``) neither end nor extend a run.
+    interacted with). Hidden frames not merged by occlusion (up to ``max_gap_s``) neither end nor extend a run.
 ``appear``
     B7 rule 6, per segment: the first frame in which the agent is seen, when that segment's centre lies within
     ``edge_m = 0.5 m`` of the area's boundary; ``t_end_ns`` = the start of its first sighting that lasts
