@@ -17,9 +17,10 @@ Tables, all measured in this process, one run after another (no parallel load on
    0.6 m, correlated below 0.8 m between true body centres) and the *measurement* truth
    (:func:`~fusiontrack.sim.situations.segment_situation_events` on
    :func:`~fusiontrack.eval.situations.segment_frames`: the detector's segments, each point attributed to the
-   agent its beam hit). Each twice: as labelled, and with the same persistence rules on both sides
-   (``TRUTH_PERSISTENCE``: a split undone by a re-merge of the same people within 0.5 s is dropped with that
-   merge; correlated gaps up to 0.4 s bridged);
+   agent its beam hit; a person hidden behind a neighbour, whose target's gate holds that neighbour's segment
+   alone, is merged with it, as B7 rule 1 merges their targets). Each twice: as labelled, and with the same
+   persistence rules on both sides (``TRUTH_PERSISTENCE``: a split undone by a re-merge of the same people
+   within 0.5 s is dropped with that merge; correlated gaps up to 0.4 s bridged);
 3. how the scanners see pairs of people by centre distance: the share of frames in which the detector puts both
    in one two-feet segment, or gives each a segment of its own (points attributed to the nearest true person
    within 0.5 m). The situation truth calls a pair merged below 0.6 m; where the simulated pairs walk

@@ -130,10 +130,117 @@ def test_hidden_while_merged_is_no_split() -> None:
 
 
 def test_pair_seen_again_after_max_gap_starts_afresh() -> None:
+    # together (one segment) 0.5 s, then nobody returns anything for 1.5 s (> max_gap_s = 1 s: both targets find
+    # nothing in their gates and are gone), then both are seen apart: new targets, no split
+    frames = _pair_sequence([True] * 25 + [False] * 100)
+    frames[25:100] = [_frame(k, [1, 2], [[0, 0], [0.5, 0]], np.zeros((0, 2)), np.zeros((0, 2))) for k in range(25, 100)]
+    for occlusion in (True, False):
+        events = segment_situation_events(frames, BOUNDS, occlusion_merges=occlusion)
+        assert not [e for e in events if e.kind in ("merge", "split")]
+
+
+def test_hidden_beside_a_friend_for_longer_than_max_gap_is_still_merged() -> None:
+    # 1 and 2 one segment for 0.5 s; then 2 has no returns for 1.5 s but stands 0.5 m from 1's own segment (its
+    # target finds that segment, c = 1, and so does 1's: B7 rule 1, one merged target that never misses a
+    # detection); seen apart again: one split. Without occlusion merges the hidden frames are skipped and the pair
+    # is seen again after more than max_gap_s: it starts afresh.
     together = [True] * 25 + [False] * 100
-    seen2 = [True] * 25 + [False] * 75 + [True] * 25  # hidden 1.5 s (> max_gap_s = 1 s), then seen apart
-    events = segment_situation_events(_pair_sequence(together, seen2), BOUNDS)
-    assert not [e for e in events if e.kind in ("merge", "split")]
+    seen2 = [True] * 25 + [False] * 75 + [True] * 25
+    frames = _pair_sequence(together, seen2)
+    events = [(e.kind, e.t_ns, e.track_ids) for e in segment_situation_events(frames, BOUNDS)
+              if e.kind in ("merge", "split")]
+    assert events == [("split", 100 * DT_NS, (1, 2))]
+    assert not [e for e in segment_situation_events(frames, BOUNDS, occlusion_merges=False)
+                if e.kind in ("merge", "split")]
+
+
+def _walk_behind(y_m: float, third: bool = False) -> list[SegmentFrame]:
+    """1 stands at the origin (a segment of its own); 2 walks along y = y_m from x = -1 to 1 m at 1 m/s and has
+    no returns while |x| < 0.3 m (frames 36-64: hidden behind 1); with ``third``, 3 stands at (0, 1) with its own
+    segment (1 m from 1: outside 1's gate, and 1 outside 3's)."""
+    frames = []
+    for k in range(101):
+        x = -1.0 + 0.02 * k
+        ids, pos = [1, 2], [[0.0, 0.0], [x, y_m]]
+        centres, returns = [[0.0, 0.0]], [[8, 0]]
+        if abs(k - 50) >= 15:
+            centres.append([x, y_m])
+            returns.append([0, 8])
+        if third:
+            ids.append(3)
+            pos.append([0.0, 1.0])
+            centres.append([0.0, 1.0])
+            returns = [[*r, 0] for r in returns] + [[0, 0, 8]]
+        frames.append(_frame(k, ids, pos, centres, returns))
+    return frames
+
+
+def _hidden_frames(frames: list[SegmentFrame]) -> list[int]:
+    return [k for k, f in enumerate(frames) if not (f.returns[:, 1] > 0).any()]
+
+
+def test_walking_behind_someone_is_a_merge_and_a_split() -> None:
+    # 2 passes 0.4 m behind 1 and is hidden for 0.58 s: its target's gate (0.8 m) holds 1's segment alone (c = 1)
+    # and 1's gate holds nothing else: B7 rule 1 merges them (seed 001: complete occlusion is a merge/split)
+    frames = _walk_behind(0.4)
+    hidden = _hidden_frames(frames)
+    assert hidden == list(range(36, 65))
+    events = [(e.kind, e.t_ns, e.track_ids) for e in segment_situation_events(frames, BOUNDS)
+              if e.kind in ("merge", "split")]
+    assert events == [("merge", hidden[0] * DT_NS, (1, 2)), ("split", (hidden[-1] + 1) * DT_NS, (1, 2))]
+    labels = segment_situations(frames, BOUNDS).labels
+    assert all(list(labels[k]) == [M, M] for k in hidden)
+    # the option off: hidden agents are ignored, no merge
+    assert not [e for e in segment_situation_events(frames, BOUNDS, occlusion_merges=False)
+                if e.kind in ("merge", "split")]
+    off = segment_situations(frames, BOUNDS, occlusion_merges=False).labels
+    assert all(list(off[k]) == [N, HIDDEN] for k in hidden)
+
+
+def test_hidden_out_of_reach_of_every_segment_is_no_merge() -> None:
+    # 2 passes 0.9 m behind 1: 1's segment lies outside its gate (radius 0.8 m), c = 0: nothing to merge with
+    frames = _walk_behind(0.9)
+    hidden = _hidden_frames(frames)
+    assert len(hidden) == 29
+    assert not [e for e in segment_situation_events(frames, BOUNDS) if e.kind in ("merge", "split")]
+    labels = segment_situations(frames, BOUNDS).labels
+    assert all(list(labels[k]) == [N, HIDDEN] for k in hidden)
+
+
+def test_hidden_between_two_people_is_no_merge() -> None:
+    # 3 stands at (0, 1): while 2 is hidden behind 1 (at most 0.66 m from 3) its gate holds 1's and 3's segments
+    # (c = 2: B7 rule 3, not rule 1), so no merge, although 1's and 3's gates hold their own segments alone (without
+    # 3 the same walk is a merge: test above). The hidden person's target would be correlated in a B7 tracker; the
+    # truth leaves it hidden (it has no returns of its own to label), and 1 and 3 keep what their own gates hold.
+    frames = _walk_behind(0.4, third=True)
+    hidden = _hidden_frames(frames)
+    assert not [e for e in segment_situation_events(frames, BOUNDS) if e.kind in ("merge", "split")]
+    labels = segment_situations(frames, BOUNDS).labels
+    assert all(list(labels[k]) == [N, HIDDEN, N] for k in hidden)
+
+
+@pytest.mark.parametrize(("away_frames", "split"), [(75, False), (25, True)])
+def test_a_target_gone_for_longer_than_max_gap_makes_no_split(away_frames: int, split: bool) -> None:
+    # 2 is seen 1.5 m from 1 (apart) for 0.5 s, hidden 0.5 m from 1's segment for 0.2 s (merged by occlusion),
+    # then hidden 3 m away, out of every gate (c = 0), for away_frames, then seen there. After 1.5 s
+    # (> max_gap_s = 1 s) its target is gone (B7 N_miss): it is a new target, the stale pair makes no split;
+    # after 0.5 s the target was still coasting: the merged pair splits.
+    frames = []
+    n_frames = 25 + 10 + away_frames + 25
+    for k in range(n_frames):
+        phase = 0 if k < 25 else 1 if k < 35 else 2 if k < 35 + away_frames else 3
+        p2 = [[1.5, 0.0], [0.5, 0.0], [3.0, 0.0], [3.0, 0.0]][phase]
+        centres, returns = [[0.0, 0.0]], [[8, 0]]
+        if phase in (0, 3):
+            centres.append(p2)
+            returns.append([0, 8])
+        frames.append(_frame(k, [1, 2], [[0.0, 0.0], p2], centres, returns))
+    events = [(e.kind, e.t_ns, e.track_ids) for e in segment_situation_events(frames, BOUNDS)
+              if e.kind in ("merge", "split")]
+    expected = [("merge", 25 * DT_NS, (1, 2))]
+    if split:
+        expected.append(("split", (35 + away_frames) * DT_NS, (1, 2)))
+    assert events == expected
 
 
 def test_entering_together_is_an_appear_not_a_merge() -> None:
@@ -202,10 +309,17 @@ def test_hidden_frames_neither_end_nor_extend_a_correlated_run() -> None:
             frames.append(_frame(k, [1, 2], [[0, 0], [0.6, 0]], [[0, 0]], [[8, 0]]))
         else:
             frames.append(_frame(k, [1, 2], [[0, 0], [0.6, 0]], [[0, 0], [0.6, 0]], [[8, 0], [0, 8]]))
-    events = [e for e in segment_situation_events(frames, BOUNDS) if e.kind == "correlated"]
-    # 2: one run over its hidden frames; 1 is seen alone in frames 15-22 (0.14 s >= min_state_s: its run ends)
+    events = [e for e in segment_situation_events(frames, BOUNDS, occlusion_merges=False) if e.kind == "correlated"]
+    # 2: one run over its hidden frames; 1 is seen alone in frames 15-22 (0.16 s >= min_state_s: its run ends)
     assert [(e.track_ids, e.t_ns, e.t_end_ns) for e in events] == [((1,), 0, 14 * DT_NS), ((2,), 0, 39 * DT_NS),
                                                                    ((1,), 23 * DT_NS, 39 * DT_NS)]
+    # with occlusion merges, 2's target finds 1's segment alone in frames 15-22 (0.6 m < gate 0.8 m) and 1's finds
+    # nothing else: merged (B7 rule 1) for 0.16 s, which ends both correlated runs; a split at frame 23
+    events = segment_situation_events(frames, BOUNDS)
+    assert [(e.kind, e.track_ids, e.t_ns, e.t_end_ns) for e in events] == [
+        ("correlated", (1,), 0, 14 * DT_NS), ("correlated", (2,), 0, 14 * DT_NS),
+        ("merge", (1, 2), 15 * DT_NS, 15 * DT_NS), ("split", (1, 2), 23 * DT_NS, 23 * DT_NS),
+        ("correlated", (1,), 23 * DT_NS, 39 * DT_NS), ("correlated", (2,), 23 * DT_NS, 39 * DT_NS)]
 
 
 def test_bad_input() -> None:

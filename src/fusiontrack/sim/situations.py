@@ -73,6 +73,21 @@ that hit that agent (noise-free cast of the simulator: exact attribution, no dis
   finding ``j`` has ``c = 1``; B6 counts in ``c`` every detection in the target's gate, so a pair sharing a
   segment next to a third person's segment, within ``2h``, interacts — correlated — and does not merge;
   ``gate_merges=False`` drops this condition: membership alone, as before);
+* ``merged`` by occlusion — B7 rule 1 is about *targets*, and a person occluded by a neighbour has no returns of
+  its own but still has a target, whose gate holds the occluder's segment (seed 001: "the targets may occlude each
+  other completely ... we deal with it as a merge/split condition"). The targets are the seen agents and the
+  hidden ones whose target lives: seen before, and a detection in the gate (``c >= 1``: seen, or a segment with
+  members within ``gate_m`` of the true centre) less than ``max_gap_s = 1 s`` ago (B7's ``N_miss``: frames with
+  ``c = 0``; a member of a merged target is not missing while the merged target finds its segment). A hidden
+  target whose gate holds exactly one segment with members (``c = 1``), when no target whose gate holds that
+  segment finds a second one (the ``gate_merges`` condition, over targets), is merged with that segment's members
+  (merged sets are the connected components of both kinds of link: an occluder with a segment of its own merges
+  with the person behind it; one hidden behind a merged pair joins it). With ``occlusion_merges=True`` (the
+  default) only targets' gates count in the ``c = 1`` condition of both rules (a listed agent never seen, or gone
+  longer than ``max_gap_s``, has no target); ``occlusion_merges=False`` gives the truth before: hidden agents are
+  never merged, and every listed agent's gate counts. A hidden target with ``c = 2`` (between two people) is not
+  merged and keeps the hidden label: B7 rule 3 would make its target correlated, but the correlated truth below
+  labels what agents' own returns show, and it has none;
 * ``correlated`` — seen, not merged, and either (a) a member of a segment shared with someone (the other has a
   segment of its own: its target finds two detections, ``c = 2``, B7 rule 3 and its completion in
   :mod:`fusiontrack.tracking.situations`), or (b) B6's gate about its true centre (circle of radius
@@ -81,29 +96,34 @@ that hit that agent (noise-free cast of the simulator: exact attribution, no dis
   two segments). Segments of no agent (clutter, background errors) are left out of the gate count;
 * ``appearing`` — within ``appear_window_s = 1 s`` after an *appear* event of the agent (below);
   ``disappearing`` — within ``appear_window_s`` before a *disappear* event; ``noncorrelated`` otherwise;
-  precedence as in the centre-distance truth. Hidden agents get the empty label ``""``. These per-frame
-  labels are raw (what each scan shows); the events below ask states to persist.
+  precedence as in the centre-distance truth. Hidden agents get the empty label ``""`` (``merged`` when merged by
+  occlusion). These per-frame labels are raw (what each scan shows); the events below ask states to persist.
 
 Events (the same kinds and :class:`~fusiontrack.types.Event` layout as :func:`situation_events`):
 
 ``merge`` / ``split``
-    Per pair of agents, the frames in which both are seen, each "together" (in one merged set) or "apart".
+    Per pair of agents, the frames in which both are *present* (seen, or hidden and merged by occlusion), each
+    "together" (in one merged set) or "apart".
     The pair's state changes when the other state holds in every such frame for ``min_state_s = 0.1 s``
     (B7's ``N_confirm = 3`` frames at 25 Hz: a detection must persist that long to count; two friends side
     by side are one segment in one scan and two in the next, and a one-scan blip is no situation a labeller
     would mark); the change apart -> together is a pair merge, together -> apart a pair split, dated by the
-    first frame of the new state. Frames in which both are seen more than ``max_gap_s = 1 s`` apart (B7's
-    ``N_miss``: a target hidden longer is gone) start the pair afresh, as does its first such frame: the first
-    state that holds is taken as it is, without an event. A merge event is a merged set of the frame that
+    first frame of the new state. Frames in which both are present more than ``max_gap_s = 1 s`` apart (B7's
+    ``N_miss``: a target hidden longer is gone), or a target of either started anew since the pair's last such
+    frame (its agent was seen again after its target was gone: hidden with no detection in its gate for more than
+    ``max_gap_s``), start the pair afresh, as does its first such frame: the first state that holds is taken as it
+    is, without an event. So a person hidden behind another (in its gate) for any time makes one merge and, when
+    it shows up apart, one split; one that then walked on hidden out of everybody's gate for over ``max_gap_s``
+    comes back as a new target, and its stale pair makes no split. A merge event is a merged set of the frame that
     confirms a pair merge (``track_ids`` = the set); a split event is the merged set the pair was last
     confirmed in (``track_ids`` = that set). An agent hidden while beside a friend and seen again still beside
     it makes no event; seen first inside a shared segment (entering together) makes no merge (seed 001: "when a
     nonmerged target splits, we do not consider this to be a merge/split condition").
 ``correlated``
-    Per agent, over the frames in which it is seen, its state (correlated, merged, or neither) changes with
+    Per agent, over the frames in which it is present, its state (correlated, merged, or neither) changes with
     the same ``min_state_s`` hysteresis and ``max_gap_s`` reset as a pair's; one event per run of the correlated
     state, from its first frame to its last correlated frame (``attributes["partners"]`` = the agents it
-    interacted with). Hidden frames (up to ``max_gap_s``) neither end nor extend a run.
+    interacted with). Hidden frames not merged by occlusion (up to ``max_gap_s``) neither end nor extend a run.
 ``appear``
     B7 rule 6, per segment: the first frame in which the agent is seen, when that segment's centre lies within
     ``edge_m = 0.5 m`` of the area's boundary; ``t_end_ns`` = the start of its first sighting that lasts
@@ -380,14 +400,18 @@ class SegmentAnalysis:
     positions : list of (n_k, 2) float64
         True body centres.
     labels : list of (n_k,) :data:`SITUATION_DTYPE`
-        :class:`~fusiontrack.types.Situation` values, :data:`HIDDEN` for agents without returns.
+        :class:`~fusiontrack.types.Situation` values, :data:`HIDDEN` for agents without returns (unless merged by
+        occlusion: ``merged``).
     seen : list of (n_k,) bool
     merged_set : list of (n_k,) int64
-        Merged-set index within the frame, ``-1`` = not merged.
+        Merged-set index within the frame, ``-1`` = not merged (hidden agents merged by occlusion included).
     partners : list of list of (p,) int64
         Per agent, the other agents it interacts with (sharing a segment, or members of a gated segment).
     segment_centre : list of (n_k, 2) float64
         Centre of the segment holding most of the agent's returns (NaN when hidden).
+    target_since : list of (n_k,) int64
+        When the agent's current target started (its first sighting, or the first after its target was gone,
+        module docstring); ``-1`` before it is first seen.
     """
 
     t_ns: np.ndarray
@@ -398,6 +422,7 @@ class SegmentAnalysis:
     merged_set: list[np.ndarray]
     partners: list[list[np.ndarray]]
     segment_centre: list[np.ndarray]
+    target_since: list[np.ndarray]
 
 
 def load_laser_hits(recording: Any) -> dict[str, dict[str, np.ndarray]]:
@@ -438,7 +463,8 @@ def load_laser_hits(recording: Any) -> dict[str, dict[str, np.ndarray]]:
 
 def segment_situations(frames: Sequence[SegmentFrame], bounds_m: Any, *, min_returns: int = 3,
                        gate_m: float = 0.8, edge_m: float = 0.5, appear_window_s: float = 1.0,
-                       min_state_s: float = 0.1, gate_merges: bool = True) -> SegmentAnalysis:
+                       min_state_s: float = 0.1, gate_merges: bool = True, occlusion_merges: bool = True,
+                       max_gap_s: float = 1.0) -> SegmentAnalysis:
     """Seed 001's situation of every listed agent in every frame, from the measurement truth.
 
     Parameters
@@ -460,27 +486,35 @@ def segment_situations(frames: Sequence[SegmentFrame], bounds_m: Any, *, min_ret
     gate_merges : bool
         B7 rule 1's ``c = 1`` for every target whose gate holds the shared segment (module docstring); False:
         sharing a segment is enough.
+    occlusion_merges : bool
+        A hidden agent whose target's gate holds one segment (B7 rule 1 for targets) merges with its members
+        (module docstring); False: hidden agents are never merged (the truth before).
+    max_gap_s : float
+        How long a target lives without a detection in its gate (B7 ``N_miss``), s.
 
     Returns
     -------
     SegmentAnalysis
     """
     return _segment_analysis(frames, bounds_m, min_returns, gate_m, edge_m, appear_window_s, min_state_s,
-                             gate_merges)[0]
+                             gate_merges, occlusion_merges, max_gap_s)[0]
 
 
 def segment_situation_events(frames: Sequence[SegmentFrame], bounds_m: Any, *, min_returns: int = 3,
                              gate_m: float = 0.8, edge_m: float = 0.5, appear_window_s: float = 1.0,
                              max_gap_s: float = 1.0, min_state_s: float = 0.1, sensor: str = "ground_truth",
                              split_hold_s: float = 0.0, correlated_gap_s: float = 0.0,
-                             min_correlated_s: float = 0.0, gate_merges: bool = True) -> list[Event]:
+                             min_correlated_s: float = 0.0, gate_merges: bool = True,
+                             occlusion_merges: bool = True) -> list[Event]:
     """Seed 001's situation events from the measurement truth (module docstring, "Measurement truth").
 
     Parameters are those of :func:`segment_situations`, plus ``max_gap_s`` (longest time between two frames in
-    which a pair, or an agent, is seen for a change of state to count, s), ``min_state_s`` (how long a pair's
-    "together" or an agent's correlated / merged / neither state must hold, in every frame it is seen, before it
-    counts), ``sensor`` and the persistence rules ``split_hold_s``, ``correlated_gap_s``, ``min_correlated_s``
-    of :func:`situation_events`, and ``gate_merges`` (:func:`segment_situations`).
+    which a pair, or an agent, is present — seen, or merged by occlusion — for a change of state to count, and how
+    long a target lives without a detection in its gate, s), ``min_state_s`` (how long a pair's "together" or an
+    agent's correlated / merged / neither state must hold, in every frame it is present, before it counts),
+    ``sensor`` and the persistence rules ``split_hold_s``, ``correlated_gap_s``, ``min_correlated_s``
+    of :func:`situation_events`, and ``gate_merges``, ``occlusion_merges`` (:func:`segment_situations`; its
+    ``max_gap_s`` is this one).
 
     Returns
     -------
@@ -492,7 +526,7 @@ def segment_situation_events(frames: Sequence[SegmentFrame], bounds_m: Any, *, m
     if not min_state_s >= 0:
         raise ValueError(f"min_state_s: expected a value >= 0, got {min_state_s!r}")
     a, appear, disappear = _segment_analysis(frames, bounds_m, min_returns, gate_m, edge_m, appear_window_s,
-                                             min_state_s, gate_merges)
+                                             min_state_s, gate_merges, occlusion_merges, max_gap_s)
     gap_ns = round(max_gap_s * 1e9)
     events: list[Event] = []
     hold_ns = round(min_state_s * 1e9)
@@ -501,13 +535,14 @@ def segment_situation_events(frames: Sequence[SegmentFrame], bounds_m: Any, *, m
     last_set: dict[int, frozenset[int] | None] = {}
     for k in range(a.t_ns.size):
         t = int(a.t_ns[k])
-        seen = a.seen[k]
+        seen = a.seen[k] | (a.merged_set[k] >= 0)  # seen, or hidden and merged by occlusion
         ids = a.ids[k][seen].tolist()
         sets = a.merged_set[k][seen].tolist()
         pos = dict(zip(ids, a.positions[k][seen], strict=True))
         groups: dict[int, frozenset[int]] = {
             s: frozenset(i for i, q in zip(ids, sets, strict=True) if q == s) for s in set(sets) if s >= 0}
         set_of = {i: groups.get(q) for i, q in zip(ids, sets, strict=True)}
+        since = dict(zip(ids, a.target_since[k][seen].tolist(), strict=True))
         merged_now: dict[frozenset[int], int] = {}  # merged set -> start of the change
         split_prev: dict[frozenset[int], int] = {}
         order = sorted(ids)
@@ -516,7 +551,7 @@ def segment_situation_events(frames: Sequence[SegmentFrame], bounds_m: Any, *, m
                 i, j = order[x], order[y]
                 together = set_of[i] is not None and set_of[i] is set_of[j]
                 st = pairs.get((i, j))
-                if st is None or t - st[4] > gap_ns:  # first seen together, or seen again after too long
+                if st is None or t - st[4] > gap_ns or max(since[i], since[j]) > st[4]:  # first, or a target new
                     st = pairs[(i, j)] = [None, None, None, t, t]
                 st[4] = t
                 if together == st[0]:
@@ -570,7 +605,7 @@ def _held_correlated_runs(events: list[Event], a: SegmentAnalysis, sensor: str, 
     event."""
     series: dict[int, list[tuple[int, str, set[int], np.ndarray]]] = {}
     for k in range(a.t_ns.size):
-        for j in np.flatnonzero(a.seen[k]):
+        for j in np.flatnonzero(a.seen[k] | (a.merged_set[k] >= 0)):
             lab = str(a.labels[k][j])
             state = lab if lab in (Situation.CORRELATED, Situation.MERGED) else "other"
             series.setdefault(int(a.ids[k][j]), []).append(
@@ -621,12 +656,13 @@ _DisappearRows = list[tuple[int, int, np.ndarray]]
 
 
 def _segment_analysis(frames: Sequence[SegmentFrame], bounds_m: Any, min_returns: int, gate_m: float, edge_m: float,
-                      appear_window_s: float, min_state_s: float, gate_merges: bool = True
+                      appear_window_s: float, min_state_s: float, gate_merges: bool = True,
+                      occlusion_merges: bool = True, max_gap_s: float = 1.0
                       ) -> tuple[SegmentAnalysis, _AppearRows, _DisappearRows]:
     bounds = _check_bounds(bounds_m)
     if isinstance(min_returns, bool) or not isinstance(min_returns, int | np.integer) or min_returns < 1:
         raise ValueError(f"min_returns: expected an integer >= 1, got {min_returns!r}")
-    for name, value in (("gate_m", gate_m), ("appear_window_s", appear_window_s)):
+    for name, value in (("gate_m", gate_m), ("appear_window_s", appear_window_s), ("max_gap_s", max_gap_s)):
         if not value > 0:
             raise ValueError(f"{name}: expected a value > 0, got {value!r}")
     if not min_state_s >= 0:
@@ -643,6 +679,10 @@ def _segment_analysis(frames: Sequence[SegmentFrame], bounds_m: Any, min_returns
     window_ns = round(appear_window_s * 1e9)
 
     seen_all, merged_all, partners_all, corr_all, centre_all = [], [], [], [], []
+    gap_ns = round(max_gap_s * 1e9)
+    alive_t: dict[int, int] = {}  # agent -> last time its target found a detection (c >= 1) since first seen
+    since: dict[int, int] = {}  # agent -> when its current target started
+    since_all: list[np.ndarray] = []
     for f in frames:
         n = f.ids.size
         member = f.returns >= min_returns  # (m, n)
@@ -657,15 +697,34 @@ def _segment_analysis(frames: Sequence[SegmentFrame], bounds_m: Any, min_returns
                 & (n_mem >= 1)[None, :]  # (n, m)
         else:
             gated = np.zeros((n, len(f.centres_m)), bool)
-        if gate_merges and shared.any():  # B7 rule 1: every agent whose gate holds the segment has c = 1
-            shared = shared & ~(gated & (gated.sum(axis=1) >= 2)[:, None]).any(axis=0)
+        alive = np.array([i in alive_t and f.t_ns - alive_t[i] <= gap_ns for i in f.ids.tolist()], bool)
+        for i in f.ids[seen & ~alive].tolist():  # a new target: first seen, or seen again after it was gone
+            since[i] = f.t_ns
+        # the targets: seen now, or alive (B7 N_miss); without occlusion merges every listed agent's gate counts
+        target = seen | alive if occlusion_merges else np.ones(n, bool)
+        gated_t = gated & target[:, None]
+        c = gated_t.sum(axis=1)
+        busy = (gated_t & (c >= 2)[:, None]).any(axis=0)  # segments some target with c >= 2 finds
+        if gate_merges:  # B7 rule 1: every target whose gate holds the segment has c = 1
+            shared = shared & ~busy
+        link = np.zeros((n, n), bool)
         if cand.sum() >= 2 and shared.any():
             m_c = member[shared][:, cand].astype(np.int64)
-            _, comp = connected_components(csr_matrix((m_c.T @ m_c) > 0), directed=False)
+            link[np.ix_(cand, cand)] = (m_c.T @ m_c) > 0
+        if occlusion_merges:  # a hidden target whose one detection is someone's segment merges with its members
+            for h in np.flatnonzero(target & ~seen & (c == 1)):
+                j = int(np.argmax(gated_t[h]))
+                if not (gate_merges and busy[j]):
+                    link[h, member[j]] = link[member[j], h] = True
+        np.fill_diagonal(link, False)
+        if link.any():
+            _, comp = connected_components(csr_matrix(link), directed=False)
             big = np.bincount(comp)[comp] >= 2
-            if big.any():
-                idx = np.flatnonzero(cand)[big]
-                set_index[idx] = np.unique(comp[big], return_inverse=True)[1]
+            set_index[big] = np.unique(comp[big], return_inverse=True)[1]
+        # N_miss counts the frames in which a target finds no detection (c = 0): finding one keeps it alive
+        for i in f.ids[seen | ((c >= 1) & target) if occlusion_merges else seen].tolist():
+            alive_t[i] = f.t_ns
+        since_all.append(np.array([since.get(i, -1) for i in f.ids.tolist()], np.int64))
         merged = set_index >= 0
         in_shared = (member & (n_mem >= 2)[:, None]).any(axis=0)
         if len(f.centres_m) and n:
@@ -745,10 +804,10 @@ def _segment_analysis(frames: Sequence[SegmentFrame], bounds_m: Any, min_returns
         lab[appear.reshape(-1)] = Situation.APPEARING.value
         lab[corr_all[k]] = Situation.CORRELATED.value
         lab[merged_all[k] >= 0] = Situation.MERGED.value
-        lab[~seen_all[k]] = HIDDEN
+        lab[~seen_all[k] & (merged_all[k] < 0)] = HIDDEN
         labels.append(lab)
     analysis = SegmentAnalysis(t_all, [f.ids for f in frames], [f.positions_m for f in frames], labels, seen_all,
-                               merged_all, partners_all, centre_all)
+                               merged_all, partners_all, centre_all, since_all)
     return analysis, appear_events, disappear_events
 
 
