@@ -514,3 +514,15 @@ def test_metrics_table_and_dict() -> None:
     console.print(metrics_table({"walk": m}, title="floor"))
     text = console.export_text()
     assert all(cell in text for cell in ("walk", "100.0", "0.300", "MOTP m", "IDF1max"))
+    assert "sequence" in text  # wide: one row per result
+    # a terminal too narrow for 22 columns gets one row per metric, every header and number whole
+    narrow = Console(width=80, record=True)
+    narrow.print(metrics_table({"walk": m, "run 2": m}))
+    lines = narrow.export_text().splitlines()
+    assert max(len(line) for line in lines) <= 80
+    assert "…" not in "".join(lines)
+    headers = ["HOTA", "MOTA", "IDF1", "IDF1max", "IDSW", "FP", "FN", "MOTP m"]
+    rows = {line.split("│")[1].strip(): line for line in lines if line.count("│") >= 3}
+    assert all(h in rows for h in headers)
+    assert rows["MOTA"].count("100.0") == 2
+    assert rows["MOTP m"].count("0.300") == 2

@@ -100,6 +100,7 @@ __all__ = [
     "MOT20_DISTRACTOR_CLASSES",
     "FrameMatches",
     "Metrics",
+    "MetricsTable",
     "combine_metrics",
     "evaluate_boxes",
     "evaluate_camera_boxes",
@@ -874,24 +875,63 @@ _TABLE_COLUMNS = (  # (header, field, is a fraction shown in percent)
 )
 
 
-def metrics_table(results: Mapping[str, Metrics], *, title: str | None = None) -> Table:
-    """A rich table, one row per entry of ``results``, fractions in percent with one decimal (MOTChallenge style).
+def metrics_table(results: Mapping[str, Metrics], *, title: str | None = None) -> MetricsTable:
+    """A rich renderable of ``results``, fractions in percent with one decimal (MOTChallenge style).
 
-    Floor-plane results (all with a distance scale) get a ``MOTP m`` column: the mean matched distance.
-    ``IDF1max`` is :attr:`Metrics.idf1_ceiling`.
+    One row per entry of ``results`` and one column per metric when that fits the console; otherwise (the 21
+    metric columns need about 190 characters) one row per metric and one column per entry, so that no header or
+    number is cut. Floor-plane results (all with a distance scale) get a ``MOTP m`` column (row): the mean matched
+    distance. ``IDF1max`` is :attr:`Metrics.idf1_ceiling`.
     """
-    from rich.table import Table
+    return MetricsTable(dict(results), title)
 
-    table = Table(title=title)
-    table.add_column("sequence", style="bold")
-    floor = bool(results) and all(m.distance_scale_m is not None for m in results.values())
-    for header, _, _ in _TABLE_COLUMNS:
-        table.add_column(header, justify="right")
-    if floor:
-        table.add_column("MOTP m", justify="right")
-    for seq_name, m in results.items():
-        cells = [f"{100 * getattr(m, f):.1f}" if pct else str(getattr(m, f)) for _, f, pct in _TABLE_COLUMNS]
-        if floor:
-            cells.append("-" if m.motp_m is None else f"{m.motp_m:.3f}")
-        table.add_row(str(seq_name), *cells)
-    return table
+
+class MetricsTable:
+    """The renderable of :func:`metrics_table`: wide (a row per result) when it fits, else transposed.
+
+    ``wide()`` and ``tall()`` give either layout as a :class:`rich.table.Table`.
+    """
+
+    def __init__(self, results: Mapping[str, Metrics], title: str | None = None) -> None:
+        self.results, self.title = dict(results), title
+        self._floor = bool(self.results) and all(m.distance_scale_m is not None for m in self.results.values())
+
+    def _cells(self) -> tuple[list[str], list[list[str]]]:
+        """Metric headers, and per result its cells in that order."""
+        headers = [h for h, _, _ in _TABLE_COLUMNS] + (["MOTP m"] if self._floor else [])
+        rows = []
+        for m in self.results.values():
+            cells = [f"{100 * getattr(m, f):.1f}" if pct else str(getattr(m, f)) for _, f, pct in _TABLE_COLUMNS]
+            if self._floor:
+                cells.append("-" if m.motp_m is None else f"{m.motp_m:.3f}")
+            rows.append(cells)
+        return headers, rows
+
+    def wide(self) -> Table:
+        from rich.table import Table
+
+        headers, rows = self._cells()
+        table = Table(title=self.title)
+        table.add_column("sequence", style="bold")
+        for header in headers:
+            table.add_column(header, justify="right", no_wrap=True)
+        for name, cells in zip(self.results, rows, strict=True):
+            table.add_row(str(name), *cells)
+        return table
+
+    def tall(self) -> Table:
+        from rich.table import Table
+
+        headers, rows = self._cells()
+        table = Table(title=self.title)
+        table.add_column("metric", style="bold", no_wrap=True)
+        for name in self.results:
+            table.add_column(str(name), justify="right", overflow="fold")
+        for q, header in enumerate(headers):
+            table.add_row(header, *(cells[q] for cells in rows))
+        return table
+
+    def __rich_console__(self, console: Any, options: Any) -> Any:
+        wide = self.wide()
+        natural = console.measure(wide, options=options.update(max_width=10_000)).maximum  # unclamped width
+        yield wide if natural <= options.max_width else self.tall()
