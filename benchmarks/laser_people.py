@@ -27,7 +27,9 @@ Tables, all measured in this process, one run after another (no parallel load on
    (0.5-0.6 m) the segmentation is ambiguous, and so is the instant of a merge or split;
 4. scaling: time per scan for 5-80 people (``agents.mean_present``) in the ``crowd`` hall;
 5. the real outdoor bag of leg_tracker (one annotated person, 720 s, laser frame, 10 Hz): MOTA with the
-   annotators' 0.75 m threshold, on the annotated scans (annotations after scan k belong to scan k).
+   annotators' 0.75 m threshold, on the annotated scans (annotations after scan k belong to scan k);
+6. issue 4's targets beside this run's figures (MOTA >= 0.85; median time per scan <= 2 ms on every crowd seed;
+   situation detection >= 90 % per kind, crowd, measurement truth as labelled; outdoor MOTA >= 0.9).
 
     .venv/bin/python benchmarks/laser_people.py [--seeds 0 1 2] [--crowd-seconds 60] [--groups-seconds 40]
         [--scaling 5 10 20 40 80] [--scaling-seconds 20] [--skip-scaling] [--skip-outdoor] [--skip-kalman]
@@ -307,8 +309,9 @@ def main() -> None:
                               f"{pf['m'].mota:.3f}", f"{kf['track_ms'][0]:.2f}", f"{kf['m'].mota:.3f}")
             console.print(scale)
 
+        outdoor_result = None
         if not args.skip_outdoor:
-            r = outdoor(tmp)
+            r = outdoor_result = outdoor(tmp)
             od = Table(title=f"real data: leg_tracker person_following_outdoor_1 (/scan_base2, 10 Hz, laser frame; "
                              f"{r['annotated']} annotated scans; match 0.75 m)", header_style="bold")
             for col in ("tracker", "MOTA", "IDF1", "IDSW", "FP", "FN", "track ms med / p95",
@@ -320,7 +323,38 @@ def main() -> None:
                            str(m.id_switches), str(m.fp), str(m.fn), "{:.2f} / {:.2f}".format(*r[trk]["track_ms"]),
                            "{:.2f} / {:.2f}".format(*r[trk]["total_ms"]))
             console.print(od)
+        console.print(targets_table(results, outdoor_result))
     console.print(f"total {time.perf_counter() - t_start:.0f} s")
+
+
+def targets_table(results: dict[tuple[str, int], dict[str, Any]], outdoor_result: dict[str, Any] | None) -> Table:
+    """Issue 4's targets against this run's figures: PF tracker, crowd (the 10-person case) unless said."""
+    table = Table(title="targets (PF tracker; situations: crowd, measurement truth, as labelled)", header_style="bold")
+    for col in ("target", "measured", "met"):
+        table.add_column(col, justify="left")
+
+    def row(target: str, measured: str, met: bool | None) -> None:
+        table.add_row(target, measured, "-" if met is None else "[green]yes[/]" if met else "[red]no[/]")
+
+    for name in ("crowd", "groups"):
+        mota = float(np.mean([r["pf"]["m"].mota for (n, _), r in results.items() if n == name]))
+        row(f"MOTA >= 0.85 ({name}, mean over seeds)", f"{mota:.3f}", mota >= 0.85)
+    medians = [r["pf"]["track_ms"][0] for (n, _), r in results.items() if n == "crowd"]
+    row("median time per scan <= 2 ms (crowd, every seed)", " / ".join(f"{x:.2f}" for x in medians) + " ms",
+        max(medians) <= 2.0)
+    for kind in EVENT_KINDS:
+        scores = [r["pf"]["segments"][kind] for (n, _), r in results.items() if n == "crowd"]
+        true, hit = sum(x.true for x in scores), sum(x.detected for x in scores)
+        fa = sum(x.false_alarms for x in scores)
+        if true:
+            row(f"situation detection >= 90 %: {kind}", f"{hit}/{true} ({100 * hit / true:.0f} %), FA {fa}",
+                hit / true >= 0.9)
+        else:
+            row(f"situation detection >= 90 %: {kind}", f"no true event, FA {fa}", None)
+    if outdoor_result is not None:
+        mota = outdoor_result["pf"]["m"].mota
+        row("outdoor bag MOTA >= 0.9 (0.75 m)", f"{mota:.3f}", mota >= 0.9)
+    return table
 
 
 if __name__ == "__main__":
