@@ -242,10 +242,15 @@ def clip_boxes(boxes_px: np.ndarray, image_shape: tuple[int, ...]) -> np.ndarray
 def box_visibility(boxes_px: np.ndarray, image_shape: tuple[int, ...]) -> np.ndarray:
     """Fraction ``(n,)`` of each box's area inside the image (0 for a non-finite or empty box)."""
     b = np.asarray(boxes_px, dtype=np.float64).reshape(-1, 4)
+    finite = np.isfinite(b)
+    return _visibility(b, clip_boxes(np.where(finite, b, 0.0), image_shape), finite.all(axis=1))
+
+
+def _visibility(b: np.ndarray, clipped: np.ndarray, finite: np.ndarray | bool = True) -> np.ndarray:
+    """:func:`box_visibility` of boxes ``b`` clipped to the image (``clipped``), ``finite`` the finite rows."""
     area = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
-    c = clip_boxes(np.nan_to_num(b), image_shape)
-    inside = (c[:, 2] - c[:, 0]) * (c[:, 3] - c[:, 1])
-    ok = np.isfinite(b).all(axis=1) & (area > 0)
+    inside = (clipped[:, 2] - clipped[:, 0]) * (clipped[:, 3] - clipped[:, 1])
+    ok = finite & (area > 0)
     return np.where(ok, inside / np.where(ok, area, 1.0), 0.0)
 
 
@@ -256,8 +261,12 @@ def _corner_ranges(boxes: np.ndarray, image_shape: tuple[int, ...], s: int) -> n
     A visible box narrower (or shorter) than ``s`` but at least ``s/2`` gets patches centred on it in that
     direction, overhanging it but inside the image (a person seen edge-on) [RECON]; ``hi < lo`` when even that
     is impossible."""
+    return _ranges_of_clipped(clip_boxes(boxes, image_shape), image_shape, s)
+
+
+def _ranges_of_clipped(c: np.ndarray, image_shape: tuple[int, ...], s: int) -> np.ndarray:
+    """:func:`_corner_ranges` of boxes already clipped to the image."""
     h, w = _image_hw(image_shape)
-    c = clip_boxes(boxes, image_shape)
     lo = np.ceil(c[:, :2] - 1e-9)
     hi = np.floor(c[:, 2:] + 1e-9) - s
     narrow = (hi < lo) & (c[:, 2:] - c[:, :2] >= s / 2)
@@ -276,11 +285,15 @@ def patch_counts(boxes_px: np.ndarray, image_shape: tuple[int, ...], params: Pat
     p = params or PatchParams()
     boxes = as_boxes(boxes_px)
     c = clip_boxes(boxes, image_shape)
-    area = (c[:, 2] - c[:, 0]) * (c[:, 3] - c[:, 1])
+    return _counts(boxes, c, _ranges_of_clipped(c, image_shape, p.size_px), p)
+
+
+def _counts(boxes: np.ndarray, clipped: np.ndarray, ranges: np.ndarray, p: PatchParams) -> np.ndarray:
+    """:func:`patch_counts` of finite boxes given clipped and their corner ranges."""
+    area = (clipped[:, 2] - clipped[:, 0]) * (clipped[:, 3] - clipped[:, 1])
     n = np.clip(np.round(p.density * area / p.size_px**2), p.min_count, p.max_count).astype(np.int64)
-    r = _corner_ranges(boxes, image_shape, p.size_px)
-    fits = (r[:, 2] >= r[:, 0]) & (r[:, 3] >= r[:, 1])
-    return np.where(fits & (box_visibility(boxes, image_shape) >= p.min_visible), n, 0)
+    fits = (ranges[:, 2] >= ranges[:, 0]) & (ranges[:, 3] >= ranges[:, 1])
+    return np.where(fits & (_visibility(boxes, clipped) >= p.min_visible), n, 0)
 
 
 def sample_patches(
@@ -317,17 +330,18 @@ def sample_patches(
     rng = np.random.default_rng(rng)
     boxes = as_boxes(boxes_px)
     h, w = _image_hw(image_shape)
-    off = box_visibility(boxes, image_shape) <= 0
+    c = clip_boxes(boxes, image_shape)  # (as_boxes: finite)
+    off = _visibility(boxes, c) <= 0
     if off.any():
         i = int(np.flatnonzero(off)[0])
         raise ValueError(f"boxes_px[{i}]: box {boxes[i].tolist()} lies outside the {w}x{h} image")
-    n = patch_counts(boxes, image_shape, p)
+    r = _ranges_of_clipped(c, image_shape, p.size_px)
+    n = _counts(boxes, c, r, p)
     if counts is not None:
         req = np.broadcast_to(np.asarray(counts, dtype=np.int64), n.shape)
         if (req < 0).any():
             raise ValueError(f"counts: expected non-negative patch counts, got {req.tolist()}")
         n = np.where(n > 0, req, 0)
-    r = _corner_ranges(boxes, image_shape, p.size_px)
     idx = np.repeat(np.arange(len(boxes)), n)
     # uniform integer corners = uniform centres in the box shrunk by s/2 (B12)
     lo, span = r[idx, :2], r[idx, 2:] - r[idx, :2] + 1
