@@ -670,9 +670,12 @@ class FusionTracker:
         t0 = time.perf_counter()
         img = self.frames.at(t_ns)
         self._read_ns = t_ns
-        if img is not None and img.t_ns not in self._frames_seen:
-            self._frames_seen.add(img.t_ns)
-            self.stats.frames_used += 1
+        if img is not None:
+            # the score maps, checks and learning of a step score the same image: its integral images are reused
+            self.bank.cache_image(img.pixels)
+            if img.t_ns not in self._frames_seen:
+                self._frames_seen.add(img.t_ns)
+                self.stats.frames_used += 1
         self.stats.camera_s += time.perf_counter() - t0
         return img
 

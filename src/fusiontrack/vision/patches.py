@@ -26,6 +26,7 @@ y + s/2)``. Gradients are Sobel 3×3 divided by 8, i.e. grey levels per pixel, s
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,6 +35,7 @@ import numpy as np
 
 __all__ = [
     "FeatureParams",
+    "IntegralCache",
     "PatchIntegrals",
     "PatchParams",
     "Patches",
@@ -597,11 +599,81 @@ def extract_features(image_bgr: np.ndarray, patches: Patches, params: FeaturePar
     """
     p = params or FeatureParams()
     img = validate_image(image_bgr, "image_bgr")
-    region = patch_region(patches.corners_px, patches.size_px)
+    region = _patch_region_in(img, patches)
     if region is None:
         return np.zeros((0, p.n_features))
+    return patch_features(integral_channels(img, p, region), patches.corners_px, patches.size_px, p)
+
+
+def _patch_region_in(img: np.ndarray, patches: Patches) -> tuple[int, int, int, int] | None:
+    """:func:`patch_region`, checked to lie in the image."""
+    region = patch_region(patches.corners_px, patches.size_px)
+    if region is None:
+        return None
     h, w = img.shape[:2]
     if region[0] < 0 or region[1] < 0 or region[2] > w or region[3] > h:
         raise ValueError(f"patches: they span x {region[0]}..{region[2]}, y {region[1]}..{region[3]}, outside the "
                          f"{w}x{h} image")
-    return patch_features(integral_channels(img, p, region), patches.corners_px, patches.size_px, p)
+    return region
+
+
+def _exact_sums(params: FeatureParams, image_shape: tuple[int, ...]) -> bool:
+    """Whether every rectangle sum of :func:`integral_channels`' table is exact in float64, so the same whatever
+    region the table covers: R, G, B are integers; ``ψ`` is 0 or a float32 above ``τ_G`` (a multiple of its
+    ulp, ``2^(⌊log2 τ_G⌋ − 23)``), at most 181 (Sobel / 8 of 0-255: 127.5 √2) per pixel; the table's sums of
+    ``H W`` pixels stay within the 53 bits of float64 when ``log2(181 H W) <= 30 + ⌊log2 τ_G⌋``."""
+    tau = params.grad_threshold
+    if not tau > 0:
+        return False
+    h, w = _image_hw(image_shape)
+    return math.log2(181.0 * h * w) <= 30 + math.floor(math.log2(tau))
+
+
+class IntegralCache:
+    """:func:`extract_features` for several sets of patches of one image, reusing the integral images of a region
+    already built for patches inside it.
+
+    A fused tracker scores one camera image several times in a step (score maps, identity checks, learning): the
+    gradients and integral images of a region (:func:`integral_channels`) cost more than the features of its
+    patches. The features are the same numbers as :func:`extract_features`' (every rectangle sum of the table is
+    exact, whatever region it covers, for ``grad_threshold`` of a few grey levels or more; with a smaller one,
+    nothing is reused).
+
+    Parameters
+    ----------
+    image_bgr : (H, W, 3) uint8
+        Kept (by reference: it must not change while the cache is used).
+    params : FeatureParams, optional
+    max_regions : int
+        Regions kept (the oldest is dropped).
+    """
+
+    def __init__(self, image_bgr: np.ndarray, params: FeatureParams | None = None, max_regions: int = 4) -> None:
+        self.image = validate_image(image_bgr, "image_bgr")
+        self.params = params or FeatureParams()
+        self.max_regions = int(max_regions)
+        self._reuse = _exact_sums(self.params, self.image.shape)
+        self._tables: list[tuple[tuple[int, int, int, int], PatchIntegrals]] = []
+        self.built = 0  # regions whose integral images were built
+        self.reused = 0  # feature extractions that reused one
+
+    def features(self, patches: Patches) -> np.ndarray:
+        """B13 features ``(n, d)`` of ``patches`` (as :func:`extract_features` on this image)."""
+        p = self.params
+        region = _patch_region_in(self.image, patches)
+        if region is None:
+            return np.zeros((0, p.n_features))
+        table = None
+        if self._reuse:
+            x0, y0, x1, y1 = region
+            table = next((t for r, t in self._tables if r[0] <= x0 and r[1] <= y0 and x1 <= r[2] and y1 <= r[3]),
+                         None)
+        if table is None:
+            table = integral_channels(self.image, p, region)
+            self.built += 1
+            if self._reuse and self.max_regions > 0:
+                self._tables.append((region, table))
+                del self._tables[:-self.max_regions]
+        else:
+            self.reused += 1
+        return patch_features(table, patches.corners_px, patches.size_px, p)
