@@ -425,15 +425,24 @@ def orientation_energy(grey: np.ndarray, params: FeatureParams | None = None) ->
     g = np.asarray(grey, dtype=np.float32)
     gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
     gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+    out = np.zeros((*g.shape, p.n_bins), np.float32)
+    _bin_gradients(gx, gy, p, out.reshape(-1, p.n_bins))
+    return out
+
+
+def _bin_gradients(gx: np.ndarray, gy: np.ndarray, p: FeatureParams, out: np.ndarray) -> None:
+    """Write ``ψ_k`` of gradients ``gx, gy (h, w)`` into the bin columns ``out (h w, K)`` (zeros, pixel-major).
+
+    Only the pixels above ``τ_G`` get an orientation (a tenth of them in camera images: ``arctan2`` is most of
+    the cost); each is computed as over the whole array, element by element, so the bits are those of binning
+    every pixel."""
     mag = np.sqrt(gx * gx + gy * gy)  # NumPy, not cv2.magnitude: the same bits whatever the threading
-    mag[mag <= p.grad_threshold] = 0.0
+    strong = np.flatnonzero(mag > p.grad_threshold)  # weaker gradients count in no bin
     # unsigned orientation θ = atan2(Gy, Gx) mod π; bin k centred at kπ/K, width π/K, wrap-around (B13, Levi-Weiss)
     k = p.n_bins
-    theta = np.arctan2(gy, gx)
+    theta = np.arctan2(gy.reshape(-1)[strong], gx.reshape(-1)[strong])
     b = np.floor(theta * (k / np.pi) + 0.5).astype(np.int64) % k
-    out = np.zeros((*g.shape, k), np.float32)
-    np.put_along_axis(out, b[..., None], mag[..., None], axis=2)
-    return out
+    out[strong, b] = mag.reshape(-1)[strong]
 
 
 def integral_channels(image_bgr: np.ndarray, params: FeatureParams | None = None,
@@ -466,9 +475,14 @@ def integral_channels(image_bgr: np.ndarray, params: FeatureParams | None = None
     mx0, my0, mx1, my1 = max(x0 - 1, 0), max(y0 - 1, 0), min(x1 + 1, w), min(y1 + 1, h)
     crop = img[my0:my1, mx0:mx1]
     grey = cv2.cvtColor(crop, cv2.COLOR_BGR2GRAY).astype(np.float32)
-    psi = orientation_energy(grey, p)[y0 - my0:y1 - my0, x0 - mx0:x1 - mx0]
-    rgb = crop[y0 - my0:y1 - my0, x0 - mx0:x1 - mx0, ::-1].astype(np.float32)
-    stack = np.concatenate([rgb, psi], axis=2)
+    gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+    gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+    inner = (slice(y0 - my0, y1 - my0), slice(x0 - mx0, x1 - mx0))
+    # R, G, B then ψ (orientation_energy's, of the region's pixels only) in one buffer
+    stack = np.zeros((y1 - y0, x1 - x0, 3 + p.n_bins), np.float32)
+    stack[..., :3] = crop[inner][..., ::-1]
+    flat = stack.reshape(-1, 3 + p.n_bins)
+    _bin_gradients(np.ascontiguousarray(gx[inner]), np.ascontiguousarray(gy[inner]), p, flat[:, 3:])
     table = cv2.integral(stack, sdepth=cv2.CV_64F)
     if table.ndim == 2:  # cv2 drops a channel axis of length 1; keep it
         table = table[..., None]
