@@ -3,6 +3,7 @@ features, box scores and score maps are bit for bit those computed afresh for ea
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -13,6 +14,8 @@ from fusiontrack.vision.patches import (
     PatchParams,
     box_visibility,
     extract_features,
+    integral_channels,
+    orientation_energy,
     sample_patches,
 )
 
@@ -92,3 +95,24 @@ def test_box_visibility_of_partial_empty_and_non_finite_boxes():
     boxes = np.array([[-10, 0, 10, 20], [300, 230, 340, 250], [0, 0, 0, 10], [np.nan, 0, 10, 10],
                       [-np.inf, 0, 10, 10], [0, 0, np.inf, 10], [400, 0, 420, 10]])
     np.testing.assert_allclose(box_visibility(boxes, (H, W)), [0.5, 0.25, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("params", [FeatureParams(), FeatureParams(n_bins=6, grad_threshold=3.0),
+                                    FeatureParams(grad_threshold=0.0)])
+def test_orientation_energy_is_the_per_pixel_definition(params):
+    # B13 written out for every pixel: the magnitude in the bin of the unsigned orientation, 0 at or below tau_G
+    # (the implementation takes arctan2 of the strong pixels only)
+    grey = _image(5)[..., 1].astype(np.float32)
+    gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+    gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+    mag = np.sqrt(gx * gx + gy * gy)
+    k = params.n_bins
+    b = np.floor(np.arctan2(gy, gx) * (k / np.pi) + 0.5).astype(np.int64) % k
+    expected = np.where((np.arange(k) == b[..., None]) & (mag > params.grad_threshold)[..., None], mag[..., None], 0)
+    np.testing.assert_array_equal(orientation_energy(grey, params), expected.astype(np.float32))
+    # and the integral images of a region hold the same psi (its sums over single pixels)
+    x0, y0, x1, y1 = 37, 21, 150, 130
+    table = integral_channels(_image(5), params, (x0, y0, x1, y1)).table
+    psi = np.diff(np.diff(table, axis=0), axis=1)[..., 3:]
+    full = orientation_energy(cv2.cvtColor(_image(5), cv2.COLOR_BGR2GRAY).astype(np.float32), params)
+    np.testing.assert_allclose(psi, full[y0:y1, x0:x1], atol=1e-6 * max(1.0, float(table[-1, -1, 3:].max())))
