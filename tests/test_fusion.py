@@ -305,6 +305,9 @@ class _FakeBank:
     def is_trained(self, tid: int) -> bool:
         return tid in self.trained
 
+    def cache_image(self, image) -> None:  # (AppearanceBank's reuse of an image's integral images)
+        pass
+
     def box_scores(self, pixels, boxes, ids) -> np.ndarray:
         rows = np.argmin(np.abs(0.5 * (boxes[:, :1] + boxes[:, 2:3]) - self.row_u[None]), axis=1)
         return np.array([[1.0 if self.prefers[tid] == r else -1.0 for tid in ids] for r in rows])

@@ -535,13 +535,28 @@ def _occlusion(boxes: np.ndarray, ok: np.ndarray) -> np.ndarray:
 
 
 def _components(points: np.ndarray, radius_m: float) -> np.ndarray:
-    """Labels ``(n,)`` of the groups of ``points (n, 2)`` linked by distances below ``radius_m``."""
-    from scipy.sparse.csgraph import connected_components
-
-    if points.shape[0] < 2:
-        return np.arange(points.shape[0])
-    close = np.linalg.norm(points[:, None] - points[None], axis=2) < radius_m
-    return connected_components(close, directed=False)[1]
+    """Labels ``(n,)`` of the groups of ``points (n, 2)`` linked by distances below ``radius_m``, numbered in the
+    order of their first point (as :func:`scipy.sparse.csgraph.connected_components`; a few targets: a search
+    in Python costs a tenth of building its sparse graph)."""
+    n = points.shape[0]
+    if n < 2:
+        return np.arange(n)
+    close = (np.linalg.norm(points[:, None] - points[None], axis=2) < radius_m).tolist()
+    labels = [-1] * n
+    count = 0
+    for first in range(n):
+        if labels[first] >= 0:
+            continue
+        labels[first] = count
+        stack = [first]
+        while stack:
+            row = close[stack.pop()]
+            for j in range(n):
+                if row[j] and labels[j] < 0:
+                    labels[j] = count
+                    stack.append(j)
+        count += 1
+    return np.array(labels)
 
 
 class FusionTracker:
@@ -670,9 +685,12 @@ class FusionTracker:
         t0 = time.perf_counter()
         img = self.frames.at(t_ns)
         self._read_ns = t_ns
-        if img is not None and img.t_ns not in self._frames_seen:
-            self._frames_seen.add(img.t_ns)
-            self.stats.frames_used += 1
+        if img is not None:
+            # the score maps, checks and learning of a step score the same image: its integral images are reused
+            self.bank.cache_image(img.pixels)
+            if img.t_ns not in self._frames_seen:
+                self._frames_seen.add(img.t_ns)
+                self.stats.frames_used += 1
         self.stats.camera_s += time.perf_counter() - t0
         return img
 
@@ -1021,14 +1039,18 @@ class FusionTracker:
         tracker's ids were.
         """
         p = self.params
-        ids = np.array([st.track_id for st in states], np.int64)
+        ids = [int(st.track_id) for st in states]
         pos = np.array([st.position_m for st in states])
-        row = {int(tid): k for k, tid in enumerate(ids)}
+        row = {tid: k for k, tid in enumerate(ids)}
         d = np.linalg.norm(pos[:, None] - pos[None], axis=2)
         checks = self._checks
-        # contacts: close pairs, and the members of this step's merges and splits
-        close = np.argwhere(np.triu(d < p.d_contact_m, 1))
-        contacts = {(min(int(ids[i]), int(ids[j])), max(int(ids[i]), int(ids[j]))): False for i, j in close}
+        # contacts: close pairs (row-major, as the checks are then opened and scored), and the members of this
+        # step's merges and splits
+        contacts: dict[tuple[int, int], bool] = {}
+        for i, j in zip(*(k.tolist() for k in np.nonzero(d < p.d_contact_m)), strict=True):
+            if i < j:
+                a, b = ids[i], ids[j]
+                contacts[(a, b) if a < b else (b, a)] = False
         for e in self.events:
             if e.kind in ("merge", "split"):
                 for a, b in itertools.combinations(sorted(e.track_ids), 2):

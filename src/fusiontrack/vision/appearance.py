@@ -43,6 +43,7 @@ from sklearn.tree import DecisionTreeClassifier
 
 from .patches import (
     FeatureParams,
+    IntegralCache,
     Patches,
     PatchParams,
     as_boxes,
@@ -855,6 +856,23 @@ class AppearanceBank:
         self.params = params or AppearanceParams()
         self.rng = np.random.default_rng(rng)
         self._targets: dict[int, AppearanceClassifier] = {}
+        self._integrals: IntegralCache | None = None  # :meth:`cache_image`
+
+    def cache_image(self, image: np.ndarray | None) -> None:
+        """Reuse the integral images (B13, X3) of ``image`` across the scorings and trainings on it that follow,
+        until another image (or None) is given: :class:`~fusiontrack.vision.patches.IntegralCache` (the same
+        features). The array is kept by reference and must not change meanwhile; another array, even with the
+        same pixels, is not cached."""
+        if image is None:
+            self._integrals = None
+        elif self._integrals is None or self._integrals.image is not image:
+            self._integrals = IntegralCache(image, self.params.features)
+
+    def _features(self, img: np.ndarray, patches: Patches) -> np.ndarray:
+        cache = self._integrals
+        if cache is not None and cache.image is img:
+            return cache.features(patches)
+        return extract_features(img, patches, self.params.features)
 
     # -- container ----------------------------------------------------------------------------------
     @property
@@ -947,7 +965,7 @@ class AppearanceBank:
             bg, bg_owner = self._background(img.shape, boxes, [row_of[i] for i in learners if vis[row_of[i]]])
             patches = Patches(np.concatenate([patches.corners_px, bg.corners_px]),
                               np.concatenate([patches.box_index, bg.box_index]), p.patches.size_px)
-        feats = extract_features(img, patches, p.features)
+        feats = self._features(img, patches)
         n_box = len(owner)
         box_feats, bg_feats = feats[:n_box], feats[n_box:]
         has = np.bincount(owner, minlength=len(ids)) > 0
@@ -1042,7 +1060,7 @@ class AppearanceBank:
     def patch_scores(self, image: Any, patches: Patches, ids: Iterable[int] | None = None) -> np.ndarray:
         """``conf_k`` of given patches of an image: ``(n_ids, n_patches)``."""
         img = validate_image(image, "image")
-        return self.confidences(extract_features(img, patches, self.params.features), ids)
+        return self.confidences(self._features(img, patches), ids)
 
     def box_scores(self, image: Any, boxes_px: np.ndarray, ids: Iterable[int] | None = None,
                    mask: np.ndarray | None = None, exclusive: bool = False) -> np.ndarray:

@@ -25,7 +25,9 @@ y + s/2)``. Gradients are Sobel 3×3 divided by 8, i.e. grey levels per pixel, s
 
 from __future__ import annotations
 
+import functools
 import logging
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,6 +36,7 @@ import numpy as np
 
 __all__ = [
     "FeatureParams",
+    "IntegralCache",
     "PatchIntegrals",
     "PatchParams",
     "Patches",
@@ -242,10 +245,15 @@ def clip_boxes(boxes_px: np.ndarray, image_shape: tuple[int, ...]) -> np.ndarray
 def box_visibility(boxes_px: np.ndarray, image_shape: tuple[int, ...]) -> np.ndarray:
     """Fraction ``(n,)`` of each box's area inside the image (0 for a non-finite or empty box)."""
     b = np.asarray(boxes_px, dtype=np.float64).reshape(-1, 4)
+    finite = np.isfinite(b)
+    return _visibility(b, clip_boxes(np.where(finite, b, 0.0), image_shape), finite.all(axis=1))
+
+
+def _visibility(b: np.ndarray, clipped: np.ndarray, finite: np.ndarray | bool = True) -> np.ndarray:
+    """:func:`box_visibility` of boxes ``b`` clipped to the image (``clipped``), ``finite`` the finite rows."""
     area = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
-    c = clip_boxes(np.nan_to_num(b), image_shape)
-    inside = (c[:, 2] - c[:, 0]) * (c[:, 3] - c[:, 1])
-    ok = np.isfinite(b).all(axis=1) & (area > 0)
+    inside = (clipped[:, 2] - clipped[:, 0]) * (clipped[:, 3] - clipped[:, 1])
+    ok = finite & (area > 0)
     return np.where(ok, inside / np.where(ok, area, 1.0), 0.0)
 
 
@@ -256,8 +264,12 @@ def _corner_ranges(boxes: np.ndarray, image_shape: tuple[int, ...], s: int) -> n
     A visible box narrower (or shorter) than ``s`` but at least ``s/2`` gets patches centred on it in that
     direction, overhanging it but inside the image (a person seen edge-on) [RECON]; ``hi < lo`` when even that
     is impossible."""
+    return _ranges_of_clipped(clip_boxes(boxes, image_shape), image_shape, s)
+
+
+def _ranges_of_clipped(c: np.ndarray, image_shape: tuple[int, ...], s: int) -> np.ndarray:
+    """:func:`_corner_ranges` of boxes already clipped to the image."""
     h, w = _image_hw(image_shape)
-    c = clip_boxes(boxes, image_shape)
     lo = np.ceil(c[:, :2] - 1e-9)
     hi = np.floor(c[:, 2:] + 1e-9) - s
     narrow = (hi < lo) & (c[:, 2:] - c[:, :2] >= s / 2)
@@ -276,11 +288,15 @@ def patch_counts(boxes_px: np.ndarray, image_shape: tuple[int, ...], params: Pat
     p = params or PatchParams()
     boxes = as_boxes(boxes_px)
     c = clip_boxes(boxes, image_shape)
-    area = (c[:, 2] - c[:, 0]) * (c[:, 3] - c[:, 1])
+    return _counts(boxes, c, _ranges_of_clipped(c, image_shape, p.size_px), p)
+
+
+def _counts(boxes: np.ndarray, clipped: np.ndarray, ranges: np.ndarray, p: PatchParams) -> np.ndarray:
+    """:func:`patch_counts` of finite boxes given clipped and their corner ranges."""
+    area = (clipped[:, 2] - clipped[:, 0]) * (clipped[:, 3] - clipped[:, 1])
     n = np.clip(np.round(p.density * area / p.size_px**2), p.min_count, p.max_count).astype(np.int64)
-    r = _corner_ranges(boxes, image_shape, p.size_px)
-    fits = (r[:, 2] >= r[:, 0]) & (r[:, 3] >= r[:, 1])
-    return np.where(fits & (box_visibility(boxes, image_shape) >= p.min_visible), n, 0)
+    fits = (ranges[:, 2] >= ranges[:, 0]) & (ranges[:, 3] >= ranges[:, 1])
+    return np.where(fits & (_visibility(boxes, clipped) >= p.min_visible), n, 0)
 
 
 def sample_patches(
@@ -317,17 +333,18 @@ def sample_patches(
     rng = np.random.default_rng(rng)
     boxes = as_boxes(boxes_px)
     h, w = _image_hw(image_shape)
-    off = box_visibility(boxes, image_shape) <= 0
+    c = clip_boxes(boxes, image_shape)  # (as_boxes: finite)
+    off = _visibility(boxes, c) <= 0
     if off.any():
         i = int(np.flatnonzero(off)[0])
         raise ValueError(f"boxes_px[{i}]: box {boxes[i].tolist()} lies outside the {w}x{h} image")
-    n = patch_counts(boxes, image_shape, p)
+    r = _ranges_of_clipped(c, image_shape, p.size_px)
+    n = _counts(boxes, c, r, p)
     if counts is not None:
         req = np.broadcast_to(np.asarray(counts, dtype=np.int64), n.shape)
         if (req < 0).any():
             raise ValueError(f"counts: expected non-negative patch counts, got {req.tolist()}")
         n = np.where(n > 0, req, 0)
-    r = _corner_ranges(boxes, image_shape, p.size_px)
     idx = np.repeat(np.arange(len(boxes)), n)
     # uniform integer corners = uniform centres in the box shrunk by s/2 (B12)
     lo, span = r[idx, :2], r[idx, 2:] - r[idx, :2] + 1
@@ -409,15 +426,24 @@ def orientation_energy(grey: np.ndarray, params: FeatureParams | None = None) ->
     g = np.asarray(grey, dtype=np.float32)
     gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
     gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+    out = np.zeros((*g.shape, p.n_bins), np.float32)
+    _bin_gradients(gx, gy, p, out.reshape(-1, p.n_bins))
+    return out
+
+
+def _bin_gradients(gx: np.ndarray, gy: np.ndarray, p: FeatureParams, out: np.ndarray) -> None:
+    """Write ``ψ_k`` of gradients ``gx, gy (h, w)`` into the bin columns ``out (h w, K)`` (zeros, pixel-major).
+
+    Only the pixels above ``τ_G`` get an orientation (a tenth of them in camera images: ``arctan2`` is most of
+    the cost); each is computed as over the whole array, element by element, so the bits are those of binning
+    every pixel."""
     mag = np.sqrt(gx * gx + gy * gy)  # NumPy, not cv2.magnitude: the same bits whatever the threading
-    mag[mag <= p.grad_threshold] = 0.0
+    strong = np.flatnonzero(mag > p.grad_threshold)  # weaker gradients count in no bin
     # unsigned orientation θ = atan2(Gy, Gx) mod π; bin k centred at kπ/K, width π/K, wrap-around (B13, Levi-Weiss)
     k = p.n_bins
-    theta = np.arctan2(gy, gx)
+    theta = np.arctan2(gy.reshape(-1)[strong], gx.reshape(-1)[strong])
     b = np.floor(theta * (k / np.pi) + 0.5).astype(np.int64) % k
-    out = np.zeros((*g.shape, k), np.float32)
-    np.put_along_axis(out, b[..., None], mag[..., None], axis=2)
-    return out
+    out[strong, b] = mag.reshape(-1)[strong]
 
 
 def integral_channels(image_bgr: np.ndarray, params: FeatureParams | None = None,
@@ -450,9 +476,14 @@ def integral_channels(image_bgr: np.ndarray, params: FeatureParams | None = None
     mx0, my0, mx1, my1 = max(x0 - 1, 0), max(y0 - 1, 0), min(x1 + 1, w), min(y1 + 1, h)
     crop = img[my0:my1, mx0:mx1]
     grey = cv2.cvtColor(crop, cv2.COLOR_BGR2GRAY).astype(np.float32)
-    psi = orientation_energy(grey, p)[y0 - my0:y1 - my0, x0 - mx0:x1 - mx0]
-    rgb = crop[y0 - my0:y1 - my0, x0 - mx0:x1 - mx0, ::-1].astype(np.float32)
-    stack = np.concatenate([rgb, psi], axis=2)
+    gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+    gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+    inner = (slice(y0 - my0, y1 - my0), slice(x0 - mx0, x1 - mx0))
+    # R, G, B then ψ (orientation_energy's, of the region's pixels only) in one buffer
+    stack = np.zeros((y1 - y0, x1 - x0, 3 + p.n_bins), np.float32)
+    stack[..., :3] = crop[inner][..., ::-1]
+    flat = stack.reshape(-1, 3 + p.n_bins)
+    _bin_gradients(np.ascontiguousarray(gx[inner]), np.ascontiguousarray(gy[inner]), p, flat[:, 3:])
     table = cv2.integral(stack, sdepth=cv2.CV_64F)
     if table.ndim == 2:  # cv2 drops a channel axis of length 1; keep it
         table = table[..., None]
@@ -474,19 +505,46 @@ def _check_corners(integrals: PatchIntegrals, corners_px: np.ndarray, s: int) ->
 
 def _cell_sums(integrals: PatchIntegrals, corners: np.ndarray, s: int) -> np.ndarray:
     """Channel sums ``(n, 4, 3+K)`` of the 2×2 cells (top-left, top-right, bottom-left, bottom-right)."""
+    # the table at the patch's 3 x 3 grid of cell corners (one gather of 9 points instead of 16), then each cell's
+    # II(x1, y1) - II(x1, y0) - II(x0, y1) + II(x0, y0) as rect_sums computes it
     half = s // 2
-    dx = np.array([0, half, 0, half])
-    dy = np.array([0, 0, half, half])
-    x0 = corners[:, :1] + dx
-    y0 = corners[:, 1:] + dy
-    return integrals.rect_sums(x0, y0, x0 + half, y0 + half)
+    ox, oy = integrals.origin_px
+    t = integrals.table
+    w1 = t.shape[1]
+    step = np.array([0, half, 2 * half])
+    at = ((corners[:, 1:] - oy)[:, :, None] + step[None, :, None]) * w1 + (corners[:, :1] - ox)[:, :, None] + step
+    g = t.reshape(-1, t.shape[2])[at]  # (n, 3 rows y, 3 columns x, C)
+    cells = g[:, 1:, 1:] - g[:, :-1, 1:] - g[:, 1:, :-1] + g[:, :-1, :-1]  # (n, 2, 2, C): TL, TR / BL, BR
+    return cells.reshape(len(corners), 4, t.shape[2])
+
+
+def _inside_rect_sums(integrals: PatchIntegrals, x0: np.ndarray, y0: np.ndarray, x1: np.ndarray,
+                      y1: np.ndarray) -> np.ndarray:
+    """:meth:`PatchIntegrals.rect_sums` of rectangles inside the region (:func:`_check_corners`), by flat indices
+    into the table (one gather per corner instead of two-dimensional indexing: the same values)."""
+    ox, oy = integrals.origin_px
+    t = integrals.table
+    w1 = t.shape[1]
+    flat = t.reshape(-1, t.shape[2])
+    r0, r1 = (y0 - oy) * w1, (y1 - oy) * w1
+    c0, c1 = x0 - ox, x1 - ox
+    return flat[r1 + c1] - flat[r0 + c1] - flat[r1 + c0] + flat[r0 + c0]
 
 
 def patch_eoh(integrals: PatchIntegrals, corners_px: np.ndarray, size_px: int) -> np.ndarray:
     """Edge-orientation energies ``E_k`` ``(n, K)`` of whole patches (B13), four look-ups per bin."""
     c = _check_corners(integrals, corners_px, size_px)
     x0, y0 = c[:, 0], c[:, 1]
-    return integrals.rect_sums(x0, y0, x0 + size_px, y0 + size_px)[:, 3:]
+    return _inside_rect_sums(integrals, x0, y0, x0 + size_px, y0 + size_px)[:, 3:]
+
+
+@functools.cache
+def _pairs(k: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(k, 1)``, once per ``k`` (read-only)."""
+    a, b = np.triu_indices(k, 1)
+    a.setflags(write=False)
+    b.setflags(write=False)
+    return a, b
 
 
 def patch_features(integrals: PatchIntegrals, corners_px: np.ndarray, size_px: int,
@@ -528,7 +586,7 @@ def patch_features(integrals: PatchIntegrals, corners_px: np.ndarray, size_px: i
     e = eoh.sum(axis=1)  # (n, K) whole patch
     eps = p.eps_scale * size_px**2
     dominant = (e + eps) / (e.sum(axis=1, keepdims=True) + k * eps)
-    a, b = np.triu_indices(k, 1)
+    a, b = _pairs(k)
     ratios = np.log((e[:, a] + eps) / (e[:, b] + eps))
     # left/right symmetry against the mirrored bin k' = (K − k) mod K (θ → π − θ), B13
     left = eoh[:, 0] + eoh[:, 2]
@@ -583,11 +641,81 @@ def extract_features(image_bgr: np.ndarray, patches: Patches, params: FeaturePar
     """
     p = params or FeatureParams()
     img = validate_image(image_bgr, "image_bgr")
-    region = patch_region(patches.corners_px, patches.size_px)
+    region = _patch_region_in(img, patches)
     if region is None:
         return np.zeros((0, p.n_features))
+    return patch_features(integral_channels(img, p, region), patches.corners_px, patches.size_px, p)
+
+
+def _patch_region_in(img: np.ndarray, patches: Patches) -> tuple[int, int, int, int] | None:
+    """:func:`patch_region`, checked to lie in the image."""
+    region = patch_region(patches.corners_px, patches.size_px)
+    if region is None:
+        return None
     h, w = img.shape[:2]
     if region[0] < 0 or region[1] < 0 or region[2] > w or region[3] > h:
         raise ValueError(f"patches: they span x {region[0]}..{region[2]}, y {region[1]}..{region[3]}, outside the "
                          f"{w}x{h} image")
-    return patch_features(integral_channels(img, p, region), patches.corners_px, patches.size_px, p)
+    return region
+
+
+def _exact_sums(params: FeatureParams, image_shape: tuple[int, ...]) -> bool:
+    """Whether every rectangle sum of :func:`integral_channels`' table is exact in float64, so the same whatever
+    region the table covers: R, G, B are integers; ``ψ`` is 0 or a float32 above ``τ_G`` (a multiple of its
+    ulp, ``2^(⌊log2 τ_G⌋ − 23)``), at most 181 (Sobel / 8 of 0-255: 127.5 √2) per pixel; the table's sums of
+    ``H W`` pixels stay within the 53 bits of float64 when ``log2(181 H W) <= 30 + ⌊log2 τ_G⌋``."""
+    tau = params.grad_threshold
+    if not tau > 0:
+        return False
+    h, w = _image_hw(image_shape)
+    return math.log2(181.0 * h * w) <= 30 + math.floor(math.log2(tau))
+
+
+class IntegralCache:
+    """:func:`extract_features` for several sets of patches of one image, reusing the integral images of a region
+    already built for patches inside it.
+
+    A fused tracker scores one camera image several times in a step (score maps, identity checks, learning): the
+    gradients and integral images of a region (:func:`integral_channels`) cost more than the features of its
+    patches. The features are the same numbers as :func:`extract_features`' (every rectangle sum of the table is
+    exact, whatever region it covers, for ``grad_threshold`` of a few grey levels or more; with a smaller one,
+    nothing is reused).
+
+    Parameters
+    ----------
+    image_bgr : (H, W, 3) uint8
+        Kept (by reference: it must not change while the cache is used).
+    params : FeatureParams, optional
+    max_regions : int
+        Regions kept (the oldest is dropped).
+    """
+
+    def __init__(self, image_bgr: np.ndarray, params: FeatureParams | None = None, max_regions: int = 4) -> None:
+        self.image = validate_image(image_bgr, "image_bgr")
+        self.params = params or FeatureParams()
+        self.max_regions = int(max_regions)
+        self._reuse = _exact_sums(self.params, self.image.shape)
+        self._tables: list[tuple[tuple[int, int, int, int], PatchIntegrals]] = []
+        self.built = 0  # regions whose integral images were built
+        self.reused = 0  # feature extractions that reused one
+
+    def features(self, patches: Patches) -> np.ndarray:
+        """B13 features ``(n, d)`` of ``patches`` (as :func:`extract_features` on this image)."""
+        p = self.params
+        region = _patch_region_in(self.image, patches)
+        if region is None:
+            return np.zeros((0, p.n_features))
+        table = None
+        if self._reuse:
+            x0, y0, x1, y1 = region
+            table = next((t for r, t in self._tables if r[0] <= x0 and r[1] <= y0 and x1 <= r[2] and y1 <= r[3]),
+                         None)
+        if table is None:
+            table = integral_channels(self.image, p, region)
+            self.built += 1
+            if self._reuse and self.max_regions > 0:
+                self._tables.append((region, table))
+                del self._tables[:-self.max_regions]
+        else:
+            self.reused += 1
+        return patch_features(table, patches.corners_px, patches.size_px, p)
