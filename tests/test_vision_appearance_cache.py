@@ -66,12 +66,14 @@ def test_a_threshold_too_small_for_exact_sums_reuses_nothing():
 
 def test_a_bank_scores_the_cached_image_as_without_the_cache():
     img = _image(4)
+    img.setflags(write=False)  # the bank caches read-only images only (as the tracker's)
     boxes = {1: (40, 40, 90, 170), 2: (100, 50, 150, 180), 3: (200, 60, 250, 200)}
     banks = []
     for cached in (False, True):
         bank = AppearanceBank(rng=7)
         for k in range(3):
             frame = np.roll(_image(10 + k), 3 * k, axis=1)
+            frame.setflags(write=False)
             if cached:
                 bank.cache_image(frame)
             bank.train(frame, boxes)
@@ -83,6 +85,8 @@ def test_a_bank_scores_the_cached_image_as_without_the_cache():
               bank.box_scores(img.copy(), np.array([boxes[2]], float))]  # another array: not from the cache
         bank.train(img, boxes, train_ids=[2])
         banks.append((maps, sc, bank.box_scores(img, np.array([boxes[2]], float), [2])))
+        if cached:  # the cached run did reuse integral images (else this test compares two uncached runs)
+            assert bank._integrals.reused > 0
     (m0, s0, t0), (m1, s1, t1) = banks
     np.testing.assert_array_equal(m0.scores, m1.scores)
     np.testing.assert_array_equal(m0.centres_px, m1.centres_px)
@@ -116,3 +120,27 @@ def test_orientation_energy_is_the_per_pixel_definition(params):
     psi = np.diff(np.diff(table, axis=0), axis=1)[..., 3:]
     full = orientation_energy(cv2.cvtColor(_image(5), cv2.COLOR_BGR2GRAY).astype(np.float32), params)
     np.testing.assert_allclose(psi, full[y0:y1, x0:x1], atol=1e-6 * max(1.0, float(table[-1, -1, 3:].max())))
+
+
+def test_a_writeable_image_is_not_cached():
+    # a buffer refilled in place with the next frame must not give the previous frame's features
+    boxes = {1: (40, 40, 90, 170), 2: (100, 50, 150, 180), 3: (200, 60, 250, 200)}
+    query = np.array([boxes[1], boxes[2]], float)
+
+    def trained() -> AppearanceBank:
+        bank = AppearanceBank(rng=3)
+        for k in range(3):
+            bank.train(np.roll(_image(10 + k), 3 * k, axis=1), boxes)
+        return bank
+
+    bank, fresh = trained(), trained()  # the same classifiers and random streams
+    frame = _image(5)
+    bank.cache_image(frame)
+    whole = np.array([[0, 0, W, H]], float)  # its patches span (nearly) the whole image: a region every later
+    first = bank.box_scores(frame, np.vstack([whole, query]), [1, 2])  # scoring could reuse
+    np.testing.assert_array_equal(fresh.box_scores(frame.copy(), np.vstack([whole, query]), [1, 2]), first)
+    frame[:] = np.roll(_image(5), 60, axis=1)  # the next frame, in the same buffer
+    bank.cache_image(frame)
+    expected = fresh.box_scores(frame.copy(), query, [1, 2])
+    assert not np.array_equal(first[1:], expected)  # the frames differ where the boxes are
+    np.testing.assert_array_equal(bank.box_scores(frame, query, [1, 2]), expected)

@@ -931,7 +931,13 @@ class MetricsTable:
             table.add_row(header, *(cells[q] for cells in rows))
         return table
 
-    def __rich_console__(self, console: Any, options: Any) -> Any:
+    def _layout(self, console: Any, options: Any) -> Table:
         wide = self.wide()
         natural = console.measure(wide, options=options.update(max_width=10_000)).maximum  # unclamped width
-        yield wide if natural <= options.max_width else self.tall()
+        return wide if natural <= options.max_width else self.tall()
+
+    def __rich_console__(self, console: Any, options: Any) -> Any:
+        yield self._layout(console, options)
+
+    def __rich_measure__(self, console: Any, options: Any) -> Any:
+        return console.measure(self._layout(console, options), options=options)

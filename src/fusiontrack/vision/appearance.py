@@ -861,16 +861,17 @@ class AppearanceBank:
     def cache_image(self, image: np.ndarray | None) -> None:
         """Reuse the integral images (B13, X3) of ``image`` across the scorings and trainings on it that follow,
         until another image (or None) is given: :class:`~fusiontrack.vision.patches.IntegralCache` (the same
-        features). The array is kept by reference and must not change meanwhile; another array, even with the
-        same pixels, is not cached."""
-        if image is None:
+        features). The array is kept by reference; another array, even with the same pixels, is not cached, and
+        neither is a writeable one (a buffer refilled in place with the next frame would give the old features:
+        the tracker's images are read-only)."""
+        if image is None or image.flags.writeable:
             self._integrals = None
         elif self._integrals is None or self._integrals.image is not image:
             self._integrals = IntegralCache(image, self.params.features)
 
     def _features(self, img: np.ndarray, patches: Patches) -> np.ndarray:
         cache = self._integrals
-        if cache is not None and cache.image is img:
+        if cache is not None and cache.image is img and cache.params == self.params.features:
             return cache.features(patches)
         return extract_features(img, patches, self.params.features)
 

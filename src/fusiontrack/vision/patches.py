@@ -518,24 +518,11 @@ def _cell_sums(integrals: PatchIntegrals, corners: np.ndarray, s: int) -> np.nda
     return cells.reshape(len(corners), 4, t.shape[2])
 
 
-def _inside_rect_sums(integrals: PatchIntegrals, x0: np.ndarray, y0: np.ndarray, x1: np.ndarray,
-                      y1: np.ndarray) -> np.ndarray:
-    """:meth:`PatchIntegrals.rect_sums` of rectangles inside the region (:func:`_check_corners`), by flat indices
-    into the table (one gather per corner instead of two-dimensional indexing: the same values)."""
-    ox, oy = integrals.origin_px
-    t = integrals.table
-    w1 = t.shape[1]
-    flat = t.reshape(-1, t.shape[2])
-    r0, r1 = (y0 - oy) * w1, (y1 - oy) * w1
-    c0, c1 = x0 - ox, x1 - ox
-    return flat[r1 + c1] - flat[r0 + c1] - flat[r1 + c0] + flat[r0 + c0]
-
-
 def patch_eoh(integrals: PatchIntegrals, corners_px: np.ndarray, size_px: int) -> np.ndarray:
     """Edge-orientation energies ``E_k`` ``(n, K)`` of whole patches (B13), four look-ups per bin."""
     c = _check_corners(integrals, corners_px, size_px)
     x0, y0 = c[:, 0], c[:, 1]
-    return _inside_rect_sums(integrals, x0, y0, x0 + size_px, y0 + size_px)[:, 3:]
+    return integrals.rect_sums(x0, y0, x0 + size_px, y0 + size_px)[:, 3:]
 
 
 @functools.cache
@@ -684,7 +671,8 @@ class IntegralCache:
     Parameters
     ----------
     image_bgr : (H, W, 3) uint8
-        Kept (by reference: it must not change while the cache is used).
+        Kept (by reference: it must not change while the cache is used; :meth:`AppearanceBank.cache_image
+        <fusiontrack.vision.appearance.AppearanceBank.cache_image>` caches read-only images only).
     params : FeatureParams, optional
     max_regions : int
         Regions kept (the oldest is dropped).
