@@ -21,14 +21,17 @@ Tables, all measured in this process, one run after another (no parallel load on
    alone, is merged with it, as B7 rule 1 merges their targets). Each twice: as labelled, and with the same
    persistence rules on both sides (``TRUTH_PERSISTENCE``: a split undone by a re-merge of the same people
    within 0.5 s is dropped with that merge; correlated gaps up to 0.4 s bridged);
-3. how the scanners see pairs of people by centre distance: the share of frames in which the detector puts both
+3. the situations frame by frame (:func:`fusiontrack.eval.situation_agreement`): of the person-frames the
+   measurement truth labels noncorrelated, correlated or merged, the share whose track says each (episode counts
+   call a tracker that cuts one true episode in two a false alarm; this count does not);
+4. how the scanners see pairs of people by centre distance: the share of frames in which the detector puts both
    in one two-feet segment, or gives each a segment of its own (points attributed to the nearest true person
    within 0.5 m). The situation truth calls a pair merged below 0.6 m; where the simulated pairs walk
    (0.5-0.6 m) the segmentation is ambiguous, and so is the instant of a merge or split;
-4. scaling: time per scan for 5-80 people (``agents.mean_present``) in the ``crowd`` hall;
-5. the real outdoor bag of leg_tracker (one annotated person, 720 s, laser frame, 10 Hz): MOTA with the
+5. scaling: time per scan for 5-80 people (``agents.mean_present``) in the ``crowd`` hall;
+6. the real outdoor bag of leg_tracker (one annotated person, 720 s, laser frame, 10 Hz): MOTA with the
    annotators' 0.75 m threshold, on the annotated scans (annotations after scan k belong to scan k);
-6. issue 4's targets beside this run's figures (MOTA >= 0.85; median time per scan <= 2 ms on every crowd seed;
+7. issue 4's targets beside this run's figures (MOTA >= 0.85; median time per scan <= 2 ms on every crowd seed;
    situation detection >= 90 % per kind, crowd, measurement truth as labelled; outdoor MOTA >= 0.9).
 
     .venv/bin/python benchmarks/laser_people.py [--seeds 0 1 2] [--crowd-seconds 60] [--groups-seconds 40]
@@ -54,8 +57,8 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from fusiontrack.eval import evaluate_floor, frame_matches, situation_accuracy
-from fusiontrack.eval.situations import segment_frames
+from fusiontrack.eval import evaluate_floor, frame_matches, situation_accuracy, situation_agreement
+from fusiontrack.eval.situations import AGREEMENT_LABELS, segment_frames
 from fusiontrack.io.recording import Recording
 from fusiontrack.io.sync import synchronize, with_time
 from fusiontrack.laser.detector import detector_for_recording
@@ -67,6 +70,7 @@ from fusiontrack.sim.situations import (
     bridge_correlated,
     drop_undone_splits,
     segment_situation_events,
+    segment_situations,
     situation_events,
 )
 from fusiontrack.tracking.tracker import track_recording
@@ -174,6 +178,8 @@ def run_sim(name: str, seconds: float, seed: int, tmp: Path, settings: dict[str,
             for key, truth, det in (("segments", seg_events, events), ("segments_persist", seg_persist, held)):
                 out[trk][key] = situation_accuracy([e for e in truth if e.t_ns >= t_warm],
                                                    [e for e in det if e.t_ns >= t_warm], id_map=fm)
+            out[trk]["agreement"] = situation_agreement(segment_situations(seg_frames, bounds), states, fm,
+                                                        t_from_ns=t_warm)
             out[trk]["events"], out["truth"] = events, {"centre": truth_events, "segments": seg_events}
             out["id_map"] = m.id_map
     return out
@@ -278,6 +284,21 @@ def main() -> None:
                     row.append(f"{hit}/{true} ({100 * hit / max(true, 1):.0f} %), FA {fa}")
                 sit.add_row(*row)
         console.print(sit)
+
+        agree = Table(title="situation frame by frame, PF tracker vs the measurement truth (after the first "
+                            f"{WARMUP_S:g} s, summed over the seeds): of the person-frames the truth labels so, the "
+                            "share whose track (MOTA's frame-by-frame matching) says each situation, or that no "
+                            "track followed; appearing / disappearing count as noncorrelated", header_style="bold")
+        for col in ("scenario", "truth", "person-frames", *(f"track {x}" for x in AGREEMENT_LABELS), "no track"):
+            agree.add_column(col, justify="left" if col in ("scenario", "truth") else "right")
+        for name in ("crowd", "groups"):
+            counts = np.sum([r["pf"]["agreement"].counts for (n, _), r in results.items() if n == name], axis=0)
+            for i, label in enumerate(AGREEMENT_LABELS):
+                total = int(counts[i].sum())
+                agree.add_row(name, label, str(total), *(
+                    f"[bold]{100 * c / max(total, 1):.0f} %[/bold]" if j == i else f"{100 * c / max(total, 1):.0f} %"
+                    for j, c in enumerate(counts[i].tolist())))
+        console.print(agree)
 
         pairs = Table(title="how the scanners see two people by their centre distance (all seeds, after the warm-up): "
                             "share of pair-frames in one segment / each in its own segment (both can hold: one leg "

@@ -12,13 +12,16 @@ import pytest
 
 from fusiontrack.eval import (
     EvaluationError,
+    FrameMatches,
     evaluate_floor,
     frame_matches,
     match_events,
     situation_accuracy,
+    situation_agreement,
     situation_table,
 )
-from fusiontrack.sim.situations import EVENT_KINDS, situation_events
+from fusiontrack.eval.situations import AGREEMENT_LABELS
+from fusiontrack.sim.situations import EVENT_KINDS, SegmentAnalysis, situation_events
 from fusiontrack.types import Event, GroundTruth, TrackState
 
 S = 1_000_000_000  # ns per second
@@ -252,3 +255,54 @@ def test_situation_table() -> None:
     console.print(situation_table(situation_accuracy(TRUE, _perfect()[:2], id_map=ID_MAP)))
     text = console.export_text()
     assert all(cell in text for cell in ("merge", "disappear", "100.0", "0.0", "false alarms"))
+
+
+# ---- frame-level agreement ------------------------------------------------------------------------------------
+
+
+def _analysis(t_ns: list[int], labels: list[list[str]], seen: list[list[bool]],
+              merged: list[list[int]]) -> SegmentAnalysis:
+    n = len(t_ns)
+    ids = [np.array([1, 2], np.int64)] * n
+    return SegmentAnalysis(np.array(t_ns, np.int64), ids, [np.zeros((2, 2))] * n,
+                           [np.array(x, dtype=object) for x in labels], [np.array(x, bool) for x in seen],
+                           [np.array(x, np.int64) for x in merged], [[np.zeros(0, np.int64)] * 2] * n,
+                           [np.zeros((2, 2))] * n, [np.zeros(2, np.int64)] * n)
+
+
+def _state(t_ns: int, tid: int, situation: str) -> TrackState:
+    return TrackState(t_ns=t_ns, sensor="laser", track_id=tid, position_m=np.zeros(2), situation=situation)
+
+
+def test_situation_agreement_counts_each_seen_person_frame_once() -> None:
+    """Persons 1 and 2 over four frames 40 ms apart, written out by hand:
+    frame 0 (before t_from): left out;
+    frame 1: both correlated, track 10 follows 1 (says correlated), track 20 follows 2 (says merged);
+    frame 2: both merged, 1 hidden but merged by occlusion; track 10 follows 1 (merged), nobody follows 2;
+    frame 3: 1 noncorrelated and followed by 10 ('appearing' counts as noncorrelated); 2 hidden, not merged: left
+    out. States are 10 ms off the frames: the nearest is used."""
+    ms = 1_000_000
+    t = [0, 40 * ms, 80 * ms, 120 * ms]
+    analysis = _analysis(t, [["correlated", "correlated"], ["correlated", "correlated"], ["merged", "merged"],
+                             ["noncorrelated", ""]],
+                         [[True, True], [True, True], [False, True], [True, False]],
+                         [[-1, -1], [-1, -1], [0, 0], [-1, -1]])
+    matches = FrameMatches.from_frames(np.array(t), [{10: 1, 20: 2}, {10: 1, 20: 2}, {10: 1}, {10: 1}])
+    states = [_state(0, 10, "merged"), _state(0, 20, "merged"),
+              _state(50 * ms, 10, "correlated"), _state(30 * ms, 20, "merged"),
+              _state(90 * ms, 10, "merged"), _state(130 * ms, 10, "appearing")]
+    a = situation_agreement(analysis, states, matches, t_from_ns=10 * ms)
+    want = np.zeros((3, 4), np.int64)
+    want[1, 1] = want[1, 2] = 1  # frame 1
+    want[2, 2] = want[2, 3] = 1  # frame 2
+    want[0, 0] = 1  # frame 3
+    np.testing.assert_array_equal(a.counts, want)
+    assert AGREEMENT_LABELS == ("noncorrelated", "correlated", "merged")
+    assert a.share("correlated") == 0.5
+    assert a.share("merged", "no track") == 0.5
+    assert a.share("noncorrelated") == 1
+    assert math.isnan(situation_agreement(analysis, [], matches, t_from_ns=200 * ms).share("merged"))
+    # a state too far from the frame counts as no track: track 10 only at t = 0 ... frame 1 is 40 ms away
+    b = situation_agreement(analysis, states[:2], matches, t_from_ns=10 * ms, max_dt_ns=20 * ms)
+    assert b.counts[:, 3].sum() == b.counts.sum() == 5
+    assert (a + b).counts.sum() == 10

@@ -285,6 +285,7 @@ class _FakeLaser:
         self.ids = [1, 2, 3]
         self.refuse = refuse
         self.calls: list[tuple[int, int]] = []
+        self.merged_ids: frozenset[int] = frozenset()  # three walking people
 
     def exchange_ids(self, a: int, b: int) -> bool:
         self.calls.append((a, b))

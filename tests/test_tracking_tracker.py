@@ -299,6 +299,66 @@ def test_a_segment_shared_for_one_or_two_frames_is_no_merge(n_merge: int, fused_
     assert {s.track_id for s in trk.step(n * FRAME_NS, [])} == {1, 2}  # the same two identities throughout
 
 
+def test_a_merged_pair_seen_as_two_is_correlated_while_its_split_waits() -> None:
+    """Two walkers 1 m apart are one segment for 1 s (merged), then each its own segment 0.5 m apart for 1 s (closer
+    than split_min_m = 0.6: the split waits), then 1 m apart (split). While they are two segments inside one gate,
+    each detected alone, B7 rule 3 makes them correlated: their states say so, and each has one correlated run that
+    starts with that phase; they split only once apart, and keep their identities."""
+    rng = np.random.default_rng(5)
+    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0)
+    n = 4 * 25
+    wide, _ = _parallel_walkers(n, 1.0)
+    close, _ = _parallel_walkers(n, 0.5)
+    events, sit_close = [], []
+    for k in range(n):
+        t_ns = k * FRAME_NS
+        if 20 <= k < 45:
+            dets = [_fused(t_ns, wide[:, k])]
+        else:
+            pos = close[:, k] if 45 <= k < 70 else wide[:, k]
+            dets = [_detection(t_ns, np.array([p - [0.0, 0.1], p + [0.0, 0.1]]), rng) for p in pos]
+        states = trk.step(t_ns, dets)
+        events += trk.events
+        if 48 <= k < 70:
+            sit_close.append(sorted(s.situation for s in states))
+    events += trk.finish()
+    assert [e.kind for e in events if e.kind in ("merge", "split")] == ["merge", "split"]
+    split = next(e for e in events if e.kind == "split")
+    assert split.t_ns >= 70 * FRAME_NS  # not while they are 0.5 m apart
+    assert sit_close == [[Situation.CORRELATED] * 2] * len(sit_close)
+    runs = [e for e in events if e.kind == "correlated"]
+    assert sorted(e.track_ids for e in runs) == [(1,), (2,)]
+    for e in runs:
+        assert 45 * FRAME_NS <= e.t_ns <= 48 * FRAME_NS
+        assert e.t_end_ns >= 69 * FRAME_NS
+    assert {s.track_id for s in trk.step(n * FRAME_NS, [])} == {1, 2}
+
+
+def test_one_frame_of_a_shared_segment_does_not_cut_a_correlated_run() -> None:
+    """Two walkers 0.5 m apart side by side, each its own segment (correlated) for 3 s, but one segment for both
+    in one scan at 1.6 s: a merge (B7 rule 1 at once, n_merge = 1), after which they are a merged target seen as two
+    segments (splitting, but closer than split_min_m). The correlated state changes only when the other label
+    holds N_confirm frames (the measurement truth's rule), so the one merged frame does not end it: one run each,
+    across the merge."""
+    rng = np.random.default_rng(8)
+    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0)
+    n = 3 * 25
+    pos, _ = _parallel_walkers(n, 0.5)
+    events = []
+    for k in range(n):
+        t_ns = k * FRAME_NS
+        dets = [_fused(t_ns, pos[:, k])] if k == 40 else [
+            _detection(t_ns, np.array([p - [0.0, 0.1], p + [0.0, 0.1]]), rng) for p in pos[:, k]]
+        trk.step(t_ns, dets)
+        events += trk.events
+    events += trk.finish()
+    assert [e.kind for e in events].count("merge") == 1
+    runs = [e for e in events if e.kind == "correlated"]
+    assert sorted(e.track_ids for e in runs) == [(1,), (2,)]
+    for e in runs:
+        assert e.t_ns < 40 * FRAME_NS < 60 * FRAME_NS <= e.t_end_ns
+
+
 def test_correlated_runs_change_state_after_n_confirm_frames() -> None:
     """A walker passes a second, standing person 0.6 m to its side (in its gate: correlated, B7 rule 3) for 2 s,
     the bystander's segment missing in one scan every 0.2 s; before and after, a clutter detection flashes 0.5 m

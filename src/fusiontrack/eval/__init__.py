@@ -20,7 +20,14 @@ from .mot import (
     frame_matches,
     metrics_table,
 )
-from .situations import SituationScore, match_events, situation_accuracy, situation_table
+from .situations import (
+    SituationAgreement,
+    SituationScore,
+    match_events,
+    situation_accuracy,
+    situation_agreement,
+    situation_table,
+)
 
 __all__ = [
     "MOT16_DISTRACTOR_CLASSES",
@@ -29,6 +36,7 @@ __all__ = [
     "FrameMatches",
     "Metrics",
     "MetricsTable",
+    "SituationAgreement",
     "SituationScore",
     "combine_metrics",
     "evaluate_boxes",
@@ -40,5 +48,6 @@ __all__ = [
     "match_events",
     "metrics_table",
     "situation_accuracy",
+    "situation_agreement",
     "situation_table",
 ]

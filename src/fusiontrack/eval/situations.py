@@ -55,7 +55,8 @@ from .mot import FrameMatches
 if TYPE_CHECKING:
     from rich.table import Table
 
-__all__ = ["SituationScore", "match_events", "segment_frames", "situation_accuracy", "situation_table"]
+__all__ = ["AGREEMENT_LABELS", "SituationAgreement", "SituationScore", "match_events", "segment_frames",
+           "situation_accuracy", "situation_agreement", "situation_table"]
 
 _FOREVER = 2**62  # "still going on"; far from int64 overflow when differences are taken
 
@@ -240,6 +241,115 @@ def situation_table(scores: Mapping[str, SituationScore], *, title: str | None =
                       "-" if np.isnan(s.recall) else f"{100 * s.recall:.1f}",
                       "-" if np.isnan(s.precision) else f"{100 * s.precision:.1f}")
     return table
+
+
+#: The interaction situations :func:`situation_agreement` compares (``appearing`` and ``disappearing`` are about
+#: the edge, not about neighbours: they count as ``noncorrelated``).
+AGREEMENT_LABELS = ("noncorrelated", "correlated", "merged")
+_AGREEMENT_OF = {"noncorrelated": 0, "appearing": 0, "disappearing": 0, "correlated": 1, "merged": 2}
+
+
+@dataclass(frozen=True, slots=True)
+class SituationAgreement:
+    """Frame by frame, the truth's situation of each person against the situation of the track that followed them.
+
+    Attributes
+    ----------
+    counts : (3, 4) int64
+        Rows: the truth's label (:data:`AGREEMENT_LABELS`); columns: the track's label, then "no track" (the person
+        was seen but no track followed them in that frame).
+    """
+
+    counts: np.ndarray
+
+    def share(self, truth: str, tracker: str | None = None) -> float:
+        """Of the person-frames the truth labels ``truth``, the share whose track says ``tracker`` (one of
+        :data:`AGREEMENT_LABELS` or ``"no track"``; default: ``truth``, the agreement). NaN when the truth never
+        says ``truth``."""
+        i = AGREEMENT_LABELS.index(truth)
+        j = 3 if tracker == "no track" else AGREEMENT_LABELS.index(truth if tracker is None else tracker)
+        n = int(self.counts[i].sum())
+        return float(self.counts[i, j]) / n if n else float("nan")
+
+    def __add__(self, other: SituationAgreement) -> SituationAgreement:
+        return SituationAgreement(self.counts + other.counts)
+
+
+def situation_agreement(analysis: Any, states: Iterable[Any], matches: FrameMatches, *,
+                        t_from_ns: int | None = None, max_dt_ns: int = 30_000_000) -> SituationAgreement:
+    """Per-frame situation agreement: for every person the measurement truth sees (or merges by occlusion) in a
+    frame of ``analysis``, its label against the situation of the track that CLEAR's matching (``matches``) gave
+    that person at the nearest ground-truth frame, read from that track's state nearest in time.
+
+    Episode counts (:func:`situation_accuracy`) match one detection to one true episode, so a tracker that cuts one
+    episode in two shows a false alarm, and one that is a frame late on a short episode a miss; this count has
+    neither bias and shows where the time goes instead (e.g. people the truth sees as correlated whose track is
+    merged).
+
+    Parameters
+    ----------
+    analysis : SegmentAnalysis
+        :func:`~fusiontrack.sim.situations.segment_situations`'s result.
+    states : iterable of TrackState
+    matches : FrameMatches
+        :func:`~fusiontrack.eval.mot.frame_matches` of the same run.
+    t_from_ns : int, optional
+        Frames before this time are left out (e.g. a warm-up).
+    max_dt_ns : int
+        A frame of ``analysis`` uses the ground-truth frame and the track state nearest to it only within this
+        time (else the person counts as "no track").
+
+    Returns
+    -------
+    SituationAgreement
+    """
+    by_track: dict[int, tuple[list[int], list[int]]] = {}
+    for st in states:
+        code = _AGREEMENT_OF.get(str(st.situation))
+        if code is None:
+            raise EvaluationError(f"situation_agreement: unknown situation {st.situation!r} of track {st.track_id}")
+        ts, codes = by_track.setdefault(int(st.track_id), ([], []))
+        ts.append(int(st.t_ns))
+        codes.append(code)
+    tracks = {}
+    for tid, (ts, codes) in by_track.items():
+        t = np.asarray(ts, np.int64)
+        order = np.argsort(t, kind="stable")
+        tracks[tid] = (t[order], np.asarray(codes, np.int64)[order])
+    gt_t = np.asarray(matches.t_ns, np.int64)
+    counts = np.zeros((3, 4), np.int64)
+    for k, t in enumerate(np.asarray(analysis.t_ns, np.int64).tolist()):
+        if t_from_ns is not None and t < t_from_ns:
+            continue
+        present = np.asarray(analysis.seen[k], bool) | (np.asarray(analysis.merged_set[k]) >= 0)
+        if not present.any():
+            continue
+        f = _nearest(gt_t, t)
+        followed = {} if f < 0 or abs(int(gt_t[f]) - t) > max_dt_ns else {
+            g: tid for tid, g in matches.matches[f].items()}
+        for j in np.flatnonzero(present).tolist():
+            row = _AGREEMENT_OF.get(str(analysis.labels[k][j]))
+            if row is None:
+                continue
+            col = 3
+            tid = followed.get(int(analysis.ids[k][j]))
+            if tid is not None and tid in tracks:
+                tt, codes = tracks[tid]
+                q = _nearest(tt, t)
+                if q >= 0 and abs(int(tt[q]) - t) <= max_dt_ns:
+                    col = int(codes[q])
+            counts[row, col] += 1
+    return SituationAgreement(counts)
+
+
+def _nearest(times: np.ndarray, t: int) -> int:
+    """Index of the element of sorted ``times`` nearest to ``t`` (the earlier on a tie); -1 when empty."""
+    if times.size == 0:
+        return -1
+    q = int(np.searchsorted(times, t))
+    if q == times.size or (q > 0 and t - int(times[q - 1]) <= int(times[q]) - t):
+        q -= 1
+    return q
 
 
 def segment_frames(path: str | Path, *, clock_corrections_ns: Mapping[str, int] | None = None,

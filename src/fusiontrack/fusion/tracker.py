@@ -86,7 +86,6 @@ __all__ = ["BiasLearning", "CameraBias", "FrameSource", "FusionParams", "FusionS
 log = logging.getLogger(__name__)
 
 _LEARNING = (str(Situation.NONCORRELATED), str(Situation.APPEARING))
-_MERGED = str(Situation.MERGED)
 
 
 class FrameSource(Protocol):
@@ -661,6 +660,11 @@ class FusionTracker:
         """The events still held back by the laser tracker (end of a run)."""
         return self._out_events(self.laser.finish())
 
+    def _merged_ids(self) -> set[int]:
+        """Output ids of the members of the laser tracker's merged targets (their states say ``merged``, or
+        ``correlated`` while splitting)."""
+        return {self._out(t) for t in self.laser.merged_ids}
+
     def _out(self, tid: int) -> int:
         """The output id of laser track ``tid``."""
         return self._alias.get(int(tid), int(tid))
@@ -786,8 +790,8 @@ class FusionTracker:
             return states
         interval = round(p.train_interval_s * 1e9)
         row = {st.track_id: k for k, st in enumerate(states)}
-        todo = [q for q, c in self._claims.items() if t_img - c.image_ns >= interval
-                and states[row[q]].situation != _MERGED]
+        merged = self._merged_ids()
+        todo = [q for q, c in self._claims.items() if t_img - c.image_ns >= interval and q not in merged]
         if not todo:
             return states
         t0 = time.perf_counter()
@@ -1090,7 +1094,8 @@ class FusionTracker:
         t_img = self.frames.nearest_time(t_ns)
         if t_img is None:
             return states
-        walking = np.array([st.situation != _MERGED for st in states])
+        merged = self._merged_ids()
+        walking = np.array([st.track_id not in merged for st in states])
         todo = [pair for pair, c in checks.items() if not c.decided and c.image_ns != t_img
                 and walking[row[pair[0]]] and walking[row[pair[1]]]
                 and any(self.bank.is_trained(tid) for tid in c.voters)]

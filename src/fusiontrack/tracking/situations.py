@@ -77,7 +77,9 @@ SITUATION_OF_LABEL: dict[TargetLabel, Situation] = {
     TargetLabel.CORRELATED: Situation.CORRELATED,
     TargetLabel.MERGING: Situation.MERGED,
     TargetLabel.MERGED: Situation.MERGED,
-    TargetLabel.SPLITTING: Situation.MERGED,
+    # a merged target whose gate holds two detections, each its own: the people in it interact, each seen (B7
+    # rule 3's situation) while the split waits to be sure (n_split, split_min_m)
+    TargetLabel.SPLITTING: Situation.CORRELATED,
     TargetLabel.COASTING: Situation.NONCORRELATED,  # an occluded loner; not an interaction
     TargetLabel.DISAPPEARING: Situation.DISAPPEARING,
 }
