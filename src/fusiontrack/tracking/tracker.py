@@ -33,8 +33,8 @@ The step follows ARCHITECTURE.md's "Tracker step" (ALGORITHMS.md sections in bra
    leg blobs for ``single_s`` seconds holds one person: the member nearest to it goes on, the others end;
 6. **lifecycle** — unclaimed detections become candidates, confirmed after ``n_confirm`` frames on the edge
    of the covered area or ``n_confirm_interior`` inside it; a target with no detection coasts, and ends
-   after ``n_miss_edge`` frames on the edge (once it is ``edge_min_age_s`` old, and if it is heading out:
-   ``edge_leave_s``) or ``n_miss`` frames elsewhere [B7]. Standing people switch to the random-walk model
+   after ``n_miss_edge`` frames on the edge (once it is ``edge_min_age_s`` old, and with ``edge_leave_s`` only
+   if it is heading out) or ``n_miss`` frames elsewhere [B7]. Standing people switch to the random-walk model
    (B8, :func:`update_standing`) from the speed of the estimated body position.
 
 The output position of a walking target is the particle mean of the feet midpoint (B10), of a merged
@@ -184,14 +184,17 @@ class TrackerParams:
         target: every member's). Otherwise it coasts as inside (``n_miss``) and ends there as a disappear if it
         is still on the edge. People crossing in a doorway hide one another or share one segment for a few
         scans; B7's rule ended the track of one still in the room and a new track took the person back (an ID
-        switch). 0 keeps B7's rule (every target on the edge with ``c = 0``) [RECON]. Laser only, 0 -> 0.5:
+        switch). 0 (the default) keeps B7's rule (every target on the edge with ``c = 0``) [RECON]. Laser only,
+        0 -> 0.5:
         60 s crowd seeds 0-2 (measurement truth) IDSW 18/9/14 -> 13/9/16, MOTA 0.854/0.928/0.864 ->
         0.854/0.928/0.885, IDF1 0.829/0.940/0.894 -> 0.852/0.940/0.905, appear (detected/true/false alarms)
         52/57/5 -> 53/57/4, disappear 61/64/10 -> 62/64/8; 30 s crowd seeds 0-11: IDSW 81 -> 80 (switches
         after a disappear while the person stayed 12 -> 10), mean MOTA 0.8651 -> 0.8656, IDF1 0.8746 ->
         0.8733; 30 s groups seeds 0-11: unchanged (IDSW 36, MOTA 0.9059/0.9060, IDF1 0.8584/0.8585). From
         the 217 disappear events of those 24 runs (B7's rule): with 0.5 s, 4 of the 5 whose person was still in
-        the room 0.6 s later would have coasted, and 6 of the 212 others [RECON].
+        the room 0.6 s later would have coasted, and 6 of the 212 others. Fused (``benchmarks/fusion.py``'s
+        runs, 30 s crowd + groups seeds 0-11): IDSW 99 -> 104, mean IDF1 unchanged within 0.002; laser only on the
+        same runs 117 -> 116. It does not pay, so it is off [RECON].
     n_merge : int
         Frames B7 rule 1 (one detection shared by targets that found only it) must hold for the same targets before
         they merge, as ``N_confirm`` for a new detection (B7 rule 6); gaps up to ``candidate_gap_s`` in which
@@ -293,7 +296,7 @@ class TrackerParams:
     n_miss: int = 25
     n_miss_edge: int = 3
     edge_min_age_s: float = 1.0
-    edge_leave_s: float = 0.5
+    edge_leave_s: float = 0.0
     n_merge: int = 1
     n_split: int = 5
     candidate_gate_m: float = 0.5
