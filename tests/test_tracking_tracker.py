@@ -251,6 +251,9 @@ def test_two_walkers_meet_walk_together_and_separate_keep_their_identities() -> 
     assert set(merges[0].track_ids) == set(before)
 
 
+FOOT_OFFSET = np.array([0.0, 0.1])  # feet 0.2 m apart side by side, about the body centre
+
+
 def _parallel_walkers(n: int, gap_m: float) -> tuple[np.ndarray, np.ndarray]:
     """Two walkers side by side along +x, ``gap_m`` apart (y = 5 -/+ gap/2): positions (2, n, 2), feet (2, n, 2, 2)."""
     pos, feet = [], []
@@ -316,7 +319,7 @@ def test_a_merged_pair_seen_as_two_is_correlated_while_its_split_waits() -> None
             dets = [_fused(t_ns, wide[:, k])]
         else:
             pos = close[:, k] if 45 <= k < 70 else wide[:, k]
-            dets = [_detection(t_ns, np.array([p - [0.0, 0.1], p + [0.0, 0.1]]), rng) for p in pos]
+            dets = [_detection(t_ns, np.array([p - FOOT_OFFSET, p + FOOT_OFFSET]), rng) for p in pos]
         states = trk.step(t_ns, dets)
         events += trk.events
         if 48 <= k < 70:
@@ -348,7 +351,7 @@ def test_one_frame_of_a_shared_segment_does_not_cut_a_correlated_run() -> None:
     for k in range(n):
         t_ns = k * FRAME_NS
         dets = [_fused(t_ns, pos[:, k])] if k == 40 else [
-            _detection(t_ns, np.array([p - [0.0, 0.1], p + [0.0, 0.1]]), rng) for p in pos[:, k]]
+            _detection(t_ns, np.array([p - FOOT_OFFSET, p + FOOT_OFFSET]), rng) for p in pos[:, k]]
         trk.step(t_ns, dets)
         events += trk.events
     events += trk.finish()
