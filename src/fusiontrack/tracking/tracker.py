@@ -98,7 +98,7 @@ from . import kalman
 from .association import association_states, gate_distances, hungarian
 from .likelihood import laser_log_likelihood_cols
 from .pf import resample_where_cols, reweight, standard_normal
-from .situations import SITUATION_OF_LABEL, TargetLabel, boundary_distance, classify_situations, on_edge
+from .situations import SITUATION_OF_LABEL, TargetLabel, boundary_distance, classify_situations
 from .walking import (
     PERIOD,
     PSI,
@@ -935,25 +935,26 @@ class LaserPeopleTracker:
     def _frames_ns(self, n: int) -> int:
         return round(n * self._frame_ns)
 
-    def _edge(self, points: np.ndarray) -> np.ndarray:
+    def _inside_m(self, points: np.ndarray) -> np.ndarray | None:
+        """Signed distance of ``points (n, 2)`` to the boundary of the covered area, positive inside (None without
+        an area, or without points)."""
         if self._area is None or points.shape[0] == 0:
-            return np.zeros(points.shape[0], bool)
+            return None
         if self._rect is not None:
             x0, y0, x1, y1 = self._rect
             x, y = points[:, 0], points[:, 1]
-            d = np.minimum(np.minimum(x - x0, x1 - x), np.minimum(y - y0, y1 - y))
-            return d < self.params.d_edge_m
-        return on_edge(points, self._area, self.params.d_edge_m)
+            return np.minimum(np.minimum(x - x0, x1 - x), np.minimum(y - y0, y1 - y))
+        return boundary_distance(points, self._area)
+
+    def _edge(self, points: np.ndarray) -> np.ndarray:
+        """True for points on the edge band or outside the covered area (B7 rules 5-6), ``(n,)`` bool."""
+        d = self._inside_m(points)
+        return np.zeros(points.shape[0], bool) if d is None else d < self.params.d_edge_m
 
     def _outside(self, points: np.ndarray) -> np.ndarray:
         """True for points outside the covered area (never without one), ``(n,)`` bool."""
-        if self._area is None or points.shape[0] == 0:
-            return np.zeros(points.shape[0], bool)
-        if self._rect is not None:
-            x0, y0, x1, y1 = self._rect
-            x, y = points[:, 0], points[:, 1]
-            return (x < x0) | (x > x1) | (y < y0) | (y > y1)
-        return boundary_distance(points, self._area) < 0
+        d = self._inside_m(points)
+        return np.zeros(points.shape[0], bool) if d is None else d < 0
 
     # ---------------------------------------------------------------------------------------------
     def step(self, t_ns: int, detections: Sequence[Detection]) -> list[TrackState]:
