@@ -21,7 +21,7 @@ from fusiontrack.eval import (
     situation_table,
 )
 from fusiontrack.eval.situations import AGREEMENT_LABELS
-from fusiontrack.sim.situations import EVENT_KINDS, SegmentAnalysis, situation_events
+from fusiontrack.sim.situations import EVENT_KINDS, HIDDEN, SITUATION_DTYPE, SegmentAnalysis, situation_events
 from fusiontrack.types import Event, GroundTruth, TrackState
 
 S = 1_000_000_000  # ns per second
@@ -265,7 +265,7 @@ def _analysis(t_ns: list[int], labels: list[list[str]], seen: list[list[bool]],
     n = len(t_ns)
     ids = [np.array([1, 2], np.int64)] * n
     return SegmentAnalysis(np.array(t_ns, np.int64), ids, [np.zeros((2, 2))] * n,
-                           [np.array(x, dtype=object) for x in labels], [np.array(x, bool) for x in seen],
+                           [np.array(x, SITUATION_DTYPE) for x in labels], [np.array(x, bool) for x in seen],
                            [np.array(x, np.int64) for x in merged], [[np.zeros(0, np.int64)] * 2] * n,
                            [np.zeros((2, 2))] * n, [np.zeros(2, np.int64)] * n)
 
@@ -284,7 +284,7 @@ def test_situation_agreement_counts_each_seen_person_frame_once() -> None:
     ms = 1_000_000
     t = [0, 40 * ms, 80 * ms, 120 * ms]
     analysis = _analysis(t, [["correlated", "correlated"], ["correlated", "correlated"], ["merged", "merged"],
-                             ["noncorrelated", ""]],
+                             ["noncorrelated", HIDDEN]],
                          [[True, True], [True, True], [False, True], [True, False]],
                          [[-1, -1], [-1, -1], [0, 0], [-1, -1]])
     matches = FrameMatches.from_frames(np.array(t), [{10: 1, 20: 2}, {10: 1, 20: 2}, {10: 1}, {10: 1}])
@@ -305,4 +305,7 @@ def test_situation_agreement_counts_each_seen_person_frame_once() -> None:
     # a state too far from the frame counts as no track: track 10 only at t = 0 ... frame 1 is 40 ms away
     b = situation_agreement(analysis, states[:2], matches, t_from_ns=10 * ms, max_dt_ns=20 * ms)
     assert b.counts[:, 3].sum() == b.counts.sum() == 5
-    assert (a + b).counts.sum() == 10
+    # a truth label the comparison does not know is an error, not a silent skip
+    bad = _analysis(t, [["correlated", "walking"]] * 4, [[True, True]] * 4, [[-1, -1]] * 4)
+    with pytest.raises(EvaluationError, match="unknown situation 'walking'"):
+        situation_agreement(bad, states, matches)

@@ -50,7 +50,7 @@ from scipy.optimize import linear_sum_assignment
 from ..sim.situations import EVENT_KINDS, SegmentFrame, load_laser_hits
 from ..types import Event
 from .errors import EvaluationError
-from .mot import FrameMatches
+from .mot import FrameMatches, _nearest_frame
 
 if TYPE_CHECKING:
     from rich.table import Table
@@ -271,9 +271,6 @@ class SituationAgreement:
         n = int(self.counts[i].sum())
         return float(self.counts[i, j]) / n if n else float("nan")
 
-    def __add__(self, other: SituationAgreement) -> SituationAgreement:
-        return SituationAgreement(self.counts + other.counts)
-
 
 def situation_agreement(analysis: Any, states: Iterable[Any], matches: FrameMatches, *,
                         t_from_ns: int | None = None, max_dt_ns: int = 30_000_000) -> SituationAgreement:
@@ -317,39 +314,34 @@ def situation_agreement(analysis: Any, states: Iterable[Any], matches: FrameMatc
         order = np.argsort(t, kind="stable")
         tracks[tid] = (t[order], np.asarray(codes, np.int64)[order])
     gt_t = np.asarray(matches.t_ns, np.int64)
+    t_all = np.asarray(analysis.t_ns, np.int64)
+    if gt_t.size:
+        frame, _, near = _nearest_frame(gt_t, t_all, max_dt_ns)
+    else:
+        frame, near = np.zeros(t_all.size, np.int64), np.zeros(t_all.size, bool)
     counts = np.zeros((3, 4), np.int64)
-    for k, t in enumerate(np.asarray(analysis.t_ns, np.int64).tolist()):
+    for k, t in enumerate(t_all.tolist()):
         if t_from_ns is not None and t < t_from_ns:
             continue
         present = np.asarray(analysis.seen[k], bool) | (np.asarray(analysis.merged_set[k]) >= 0)
         if not present.any():
             continue
-        f = _nearest(gt_t, t)
-        followed = {} if f < 0 or abs(int(gt_t[f]) - t) > max_dt_ns else {
-            g: tid for tid, g in matches.matches[f].items()}
+        followed = {g: tid for tid, g in matches.matches[int(frame[k])].items()} if near[k] else {}
         for j in np.flatnonzero(present).tolist():
-            row = _AGREEMENT_OF.get(str(analysis.labels[k][j]))
+            label = str(analysis.labels[k][j])
+            row = _AGREEMENT_OF.get(label)
             if row is None:
-                continue
+                raise EvaluationError(f"situation_agreement: unknown situation {label!r} of person "
+                                      f"{int(analysis.ids[k][j])} at {t} ns in the truth")
             col = 3
             tid = followed.get(int(analysis.ids[k][j]))
             if tid is not None and tid in tracks:
                 tt, codes = tracks[tid]
-                q = _nearest(tt, t)
-                if q >= 0 and abs(int(tt[q]) - t) <= max_dt_ns:
-                    col = int(codes[q])
+                q, _, ok = _nearest_frame(tt, np.array([t], np.int64), max_dt_ns)
+                if ok[0]:
+                    col = int(codes[q[0]])
             counts[row, col] += 1
     return SituationAgreement(counts)
-
-
-def _nearest(times: np.ndarray, t: int) -> int:
-    """Index of the element of sorted ``times`` nearest to ``t`` (the earlier on a tie); -1 when empty."""
-    if times.size == 0:
-        return -1
-    q = int(np.searchsorted(times, t))
-    if q == times.size or (q > 0 and t - int(times[q - 1]) <= int(times[q]) - t):
-        q -= 1
-    return q
 
 
 def segment_frames(path: str | Path, *, clock_corrections_ns: Mapping[str, int] | None = None,

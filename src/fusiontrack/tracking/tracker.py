@@ -70,7 +70,7 @@ B7 rule 3 labels two people near each other that are each detected. Members' cor
 target's do, and a merge does not end them at once: the merged label must hold ``n_confirm`` frames, as any other
 change of state (the measurement truth's rule) [RECON: on crowd seeds 0-2 (60 s, after 3 s, measurement truth),
 the person-frames the truth calls correlated whose track says so went from 34 % to 59 % (merged: 70 % to 63 %),
-correlated episodes detected from 101/161 with 59 false alarms to 136/161 with 124].
+correlated episodes detected from 101/161 with 59 false alarms to 136/161 with 130].
 
 Also here: :func:`track_recording`, which builds the detector from a recording's laser topics and
 ``/tf_static`` and runs a tracker over it, and :func:`area_from_backgrounds`, the covered area inferred
@@ -1254,6 +1254,7 @@ class LaserPeopleTracker:
         # (Python scalars from tolist(): the same values, without numpy scalar indexing per row)
         w_lab_l, id_l, born_edge_l, born_l, upd_l = (w_labels.tolist(), self._id.tolist(), self._born_edge.tolist(),
                                                      self._born.tolist(), upd.tolist())
+        leaving_l = leaving_w.tolist()
         pos_w, vel_w = self._pos, self._vel
         pos_f, vel_f = _frozen_copy(pos_w), _frozen_copy(vel_w)
         corr = self._corr
@@ -1261,6 +1262,8 @@ class LaserPeopleTracker:
             lab = w_lab_l[row]
             tid = id_l[row]
             sit = _SITUATION_NAMES[lab]
+            if lab == _DISAPPEARING and not leaving_l[row]:  # (edge_leave_s) not heading out: coasting
+                sit = _NONCORRELATED_S
             if lab == _NONCORRELATED and born_edge_l[row] and t_ns - born_l[row] < appear_ns:
                 sit = _APPEARING
             if (lab == _CORRELATED or tid in corr) and lab != _COASTING and lab != _DISAPPEARING:
@@ -1270,17 +1273,10 @@ class LaserPeopleTracker:
         for i in (~gone_m).nonzero()[0].tolist():
             m = merged[i]
             lab = int(labels[n_w + i])
-            sit = _SITUATION_NAMES[lab] if lab in (_DISAPPEARING, _SPLITTING) else _MERGED_S
+            sit = _SITUATION_NAMES[lab] if lab == _SPLITTING or (lab == _DISAPPEARING and leaving_m[i]) else _MERGED_S
             mpos, mvel = _frozen_copy(m.pos), _frozen_copy(m.vel)
             if sensed_m[i] and lab != _DISAPPEARING:  # members are correlated while their split waits
-                for k, info in enumerate(m.info):
-                    tid = info.track_id
-                    if lab == _SPLITTING or tid in corr:
-                        self._correlated_step(tid, t_ns, lab == _SPLITTING, m.pos[k])
-                        rec = corr.get(tid)
-                        if rec is not None and rec[4] is not None:  # a run ended by the merge: no bridge over it
-                            self._emit_correlated(tid, rec[4])
-                            rec[4] = None
+                self._members_correlated(m, t_ns, lab == _SPLITTING)
             for k, info in enumerate(m.info):
                 states.append(_fast_state(t_ns, sensor, info.track_id, mpos[k], mvel[k], sit,
                                           sensors if sensed_m[i] else (), frozen=True))
@@ -1300,6 +1296,8 @@ class LaserPeopleTracker:
         if np.count_nonzero(gone_m) or new_merged:
             self._merged = [m for m, g in zip(merged, gone_m, strict=True) if not g] + new_merged
         for m in new_merged:
+            if self._corr:  # the merge step is a merged frame of their correlated runs
+                self._members_correlated(m, t_ns, False)
             for k, info in enumerate(m.info):
                 states.append(_fast_state(t_ns, sensor, info.track_id, m.pos[k], m.vel[k], _MERGED_S, sensors))
         for spec in new_walkers:
@@ -1664,6 +1662,19 @@ class LaserPeopleTracker:
             rec[3][1] = t_ns
         elif not rec[0] and not rec[1] and rec[3] is None and rec[4] is None:
             del corr[tid]
+
+    def _members_correlated(self, m: _Merged, t_ns: int, splitting: bool) -> None:
+        """One step with a detection of merged target ``m`` for its members' correlated runs: correlated while it
+        splits, else merged (a run it ends is emitted at once: no bridge over a merge)."""
+        corr = self._corr
+        for k, info in enumerate(m.info):
+            tid = info.track_id
+            if splitting or tid in corr:
+                self._correlated_step(tid, t_ns, splitting, m.pos[k])
+                rec = corr.get(tid)
+                if rec is not None and rec[4] is not None:
+                    self._emit_correlated(tid, rec[4])
+                    rec[4] = None
 
     def _close_correlated(self, tid: int) -> None:
         """End the correlated runs of ``tid`` (held and open): one event each."""
