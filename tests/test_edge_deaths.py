@@ -57,6 +57,7 @@ def test_a_walker_on_the_edge_not_heading_out_keeps_its_id_when_hidden(heading_d
     states, events = _run({"edge_leave_s": 0.5}, pos, feet, seen)
     assert {s.track_id for s in states} == {1}
     assert not [e for e in events if e.kind in ("disappear", "lost")]
+    assert "disappearing" not in {s.situation for s in states}  # it coasts: its states do not say it is leaving
     # the coasted track stayed with the person while hidden
     for s in states:
         k = s.t_ns // FRAME_NS
