@@ -165,6 +165,17 @@ def test_track_and_eval_a_simulated_crossing(tmp_path):
     # three people crossing, two lasers, truth at 25 Hz: a laser tracker must get most of it right
     assert metrics["mota"] > 0.7
     assert metrics["id_switches"] <= 2
+    # --at: only the truth frames nearest to a topic's messages (here the heel strikes, 2-3 per 0.1 s) are scored
+    at_json = tmp_path / "at.json"
+    run("eval", str(out), str(rec), "--at", "/ground_truth/steps", "-o", str(at_json))
+    at = json.loads(at_json.read_text())
+    assert 0 < at["at"]["frames"] < at["at"]["of"] == 12 * 25
+    assert at["metrics"]["mota"] > 0.7
+    bad = subprocess.run([sys.executable, "-m", "fusiontrack", "eval", str(out), str(rec), "--at", "/camera_9/image"],
+                         capture_output=True, text=True, timeout=300)
+    assert bad.returncode != 0
+    assert "/camera_9/image" in bad.stderr
+    assert "Traceback" not in bad.stderr
 
 
 def test_eval_of_mot_files_reproduces_tud_campus(shared_data, tmp_path):

@@ -526,3 +526,43 @@ def test_metrics_table_and_dict() -> None:
     assert all(h in rows for h in headers)
     assert rows["MOTA"].count("100.0") == 2
     assert rows["MOTP m"].count("0.300") == 2
+
+
+def test_a_slower_tracker_is_scored_at_its_own_rate(caplog: pytest.LogCaptureFixture) -> None:
+    """Truth at 25 Hz, a perfect tracker at 15 Hz (a camera): against every truth frame it misses everybody in the
+    frames between its reports (6 of 15 in each 0.6 s, 40 %), and the evaluation says why; on the truth frames
+    nearest to its own frames it scores 1."""
+    from fusiontrack.eval import truth_at
+
+    gt_dt, cam_dt = 40_000_000, 200_000_000 // 3  # 25 Hz and 15 Hz
+    n_gt = 150  # 6 s
+    t_gt = T0_NS + gt_dt * np.arange(n_gt)
+
+    def walk(t_ns: int, k: int) -> np.ndarray:  # person k (0, 1) walks along x at 1.3 m/s, 2 m from the other
+        return np.array([1.3e-9 * (t_ns - T0_NS), 2.0 * k])
+
+    gt = [GroundTruth(t_ns=int(t), sensor="sim", frame_id="world", ids=np.array([1, 2]),
+                      positions_m=np.array([walk(t, 0), walk(t, 1)])) for t in t_gt]
+    t_cam = T0_NS + np.round(cam_dt * np.arange(90)).astype(np.int64)  # 6 s of images
+    states = [TrackState(t_ns=int(t), sensor="camera", track_id=k + 10, position_m=walk(t, k), cls="person")
+              for t in t_cam for k in range(2)]
+    with caplog.at_level("WARNING", logger="fusiontrack.eval.mot"):
+        every = evaluate_floor(gt, states, 0.5)
+    # the images miss 2 truth frames of every 5: those at 40 and 160 ms of each 200 ms are > 20 ms from an image
+    assert (every.fn, every.fp) == (2 * 60, 0)
+    assert every.mota == pytest.approx(1 - 120 / 300)
+    assert "every 67 ms, the ground truth every 40 ms" in caplog.text
+    caplog.clear()
+    at_camera = truth_at(gt, t_cam)
+    assert len(at_camera) == 90  # each image has its own truth frame within 20 ms
+    assert [f.t_ns for f in at_camera] == sorted({f.t_ns for f in at_camera})
+    assert np.abs(np.array([f.t_ns for f in at_camera]) - t_cam).max() <= gt_dt // 2
+    with caplog.at_level("WARNING", logger="fusiontrack.eval.mot"):
+        own = evaluate_floor(at_camera, states, 0.5)
+    assert (own.mota, own.fn, own.fp, own.id_switches) == (1.0, 0, 0, 0)
+    assert caplog.text == ""
+    # times far from every truth frame select none; each frame is selected once however many times are near it
+    assert truth_at(gt, [T0_NS - 10**9, int(t_gt[-1]) + 10**9]) == []
+    assert [f.t_ns for f in truth_at(gt, [int(t_gt[3]) + 1, int(t_gt[3]) - 1, int(t_gt[1])])] == [t_gt[1], t_gt[3]]
+    with pytest.raises(EvaluationError, match="at least one"):
+        truth_at([], t_cam)

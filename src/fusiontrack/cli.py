@@ -758,6 +758,11 @@ def eval_(
                                                "(/ground_truth/CAMERA of a simulated recording) by IoU >= 0.5; "
                                                "default for the folder of `track --pipeline people-camera`.")
                       ] = None,
+    at: Annotated[str | None, typer.Option("--at", help="Score floor-plane tracks on the ground-truth frames nearest "
+                                           "to this topic's messages only (e.g. /camera_0/image for tracks made "
+                                           "at a 15 Hz camera's rate against 25 Hz truth: otherwise the truth "
+                                           "frames between two of its frames count everybody as missed).")
+                  ] = None,
 ) -> None:
     """Score tracks against ground truth: MOTA, MOTP, IDF1, ID switches, HOTA, FP, FN, MT/ML (TrackEval).
 
@@ -767,10 +772,12 @@ def eval_(
     less than half visible are distractors), with --camera or when the folder's tracks are of one camera.
     For a simulated recording, situation detection (seed 001 Table II) is scored too.
     """
-    from .eval import evaluate_floor, evaluate_mot_files, metrics_table, situation_accuracy, situation_table
+    from .eval import evaluate_floor, evaluate_mot_files, metrics_table, situation_accuracy, situation_table, truth_at
 
     result: dict[str, Any] = {}
     image = _eval_image_boxes(tracks, ground_truth, camera, time_source)
+    if at is not None and (image is not None or tracks.suffix == ".txt"):
+        raise ConfigError("--at: only for floor-plane tracks (image boxes are scored at their camera's frames)")
     if image is not None:
         metrics, cam = image
         console.print(metrics_table({f"{tracks.name} vs /ground_truth/{cam}": metrics},
@@ -784,9 +791,15 @@ def eval_(
     else:
         states, events = _read_tracks(tracks)
         frames, gt_topic = _read_truth(ground_truth, topic, time_source)
-        metrics = evaluate_floor(frames, states, threshold_m=threshold)
-        console.print(metrics_table({f"{tracks.name} vs {gt_topic}": metrics},
-                                    title=f"tracking, match within {threshold:g} m"))
+        scored, label = frames, f"{tracks.name} vs {gt_topic}"
+        if at is not None:
+            scored = truth_at(frames, _topic_times(ground_truth, at, time_source))
+            if not scored:
+                raise ConfigError(f"--at {at}: no message of it is within half a frame of a {gt_topic} frame")
+            label += f" at {at}"
+            result["at"] = {"topic": at, "frames": len(scored), "of": len(frames)}
+        metrics = evaluate_floor(scored, states, threshold_m=threshold)
+        console.print(metrics_table({label: metrics}, title=f"tracking, match within {threshold:g} m"))
         result["metrics"] = metrics.to_dict()
         if events and frames and "situation" in frames[0].attributes:
             from .sim.situations import situation_events
@@ -800,6 +813,14 @@ def eval_(
         output.parent.mkdir(parents=True, exist_ok=True)
         output.write_text(json.dumps(result, indent=2, default=float))
         console.print(f"metrics: {output}")
+
+
+def _topic_times(path: Path, topic: str, time_source: str) -> list[int]:
+    """The times of a recording's messages on ``topic`` (TopicError, naming it, if the recording has none)."""
+    from .io.recording import Recording
+
+    with Recording(path) as rec:
+        return [m.t_ns for m in rec.messages([topic], time_source=time_source)]
 
 
 def _eval_image_boxes(tracks: Path, recording: Path, camera: str | None, time_source: str) -> tuple[Any, str] | None:

@@ -19,6 +19,7 @@ from .mot import (
     floor_similarity,
     frame_matches,
     metrics_table,
+    truth_at,
 )
 from .situations import (
     SituationAgreement,
@@ -50,4 +51,5 @@ __all__ = [
     "situation_accuracy",
     "situation_agreement",
     "situation_table",
+    "truth_at",
 ]

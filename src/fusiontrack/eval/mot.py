@@ -109,6 +109,7 @@ __all__ = [
     "floor_similarity",
     "frame_matches",
     "metrics_table",
+    "truth_at",
 ]
 
 logger = logging.getLogger(__name__)
@@ -482,6 +483,7 @@ def _floor_sequence(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Tra
         if np.any(pair[1] > 1):
             t_dup, id_dup = pair[0][np.argmax(pair[1] > 1)].tolist()
             raise EvaluationError(f"tracks: two states of track {id_dup} at t_ns={t_dup}")
+    _warn_if_slower(gt_t, st_t, name)
     frame, dt, inside = _nearest_frame(gt_t, st_t, time_tolerance_ns)
     frame, dt, st_t, st_id, st_xy = frame[inside], dt[inside], st_t[inside], st_id[inside], st_xy[inside]
     order = np.lexsort((st_t, dt, st_id, frame))  # by frame, id, then nearest (earlier on a tie)
@@ -498,6 +500,59 @@ def _floor_sequence(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Tra
     tr_ids = [st_id[bounds[k]:bounds[k + 1]] for k in range(n_t)]
     sims = [floor_similarity(gt_pos[k], st_xy[bounds[k]:bounds[k + 1]], threshold_m) for k in range(n_t)]
     return _Sequence(name, gt_ids, tr_ids, sims)
+
+
+def _warn_if_slower(gt_t: np.ndarray, st_t: np.ndarray, name: str) -> None:
+    """Log a warning when the tracks come at a clearly lower rate than the ground truth (see :func:`truth_at`)."""
+    if gt_t.size < 3 or st_t.size < 3:
+        return
+    reports = np.unique(st_t[(st_t >= gt_t[0]) & (st_t <= gt_t[-1])])
+    if reports.size < 10:
+        return
+    gt_period, st_period = float(np.median(np.diff(gt_t))), float(np.median(np.diff(reports)))
+    if st_period > 1.5 * gt_period:
+        logger.warning("%s: the tracks come every %.0f ms, the ground truth every %.0f ms: every truth frame between "
+                       "two reports counts all its people as missed; to score at the tracker's rate, pass "
+                       "truth_at(ground truth, the tracker's frame times) (CLI: fusiontrack eval --at TOPIC)",
+                       name, st_period / 1e6, gt_period / 1e6)
+
+
+def truth_at(gt: Sequence[GroundTruth], times_ns: Iterable[int], tolerance_ns: int | None = None
+             ) -> list[GroundTruth]:
+    """The ground-truth frames nearest to ``times_ns``, to score a tracker at the rate of the sensor it runs on.
+
+    The frame-based metrics score every ground-truth frame, and a frame without any track state counts all its
+    people as missed. A tracker that reports at its sensor's rate (a 15 Hz camera) against truth written at
+    another (25 Hz, the lasers') has no state in two frames of five: its recall could not exceed 60 %, whatever
+    it tracked. Scored on the truth frames nearest to its sensor's frames instead, each of its reports meets the
+    truth of its own instant (within half a truth period; the frames are not restamped or interpolated).
+
+    Parameters
+    ----------
+    gt : sequence of GroundTruth
+        The truth, any order.
+    times_ns : iterable of int
+        The sensor's frame times (e.g. the image stamps of the camera the tracker read), ns.
+    tolerance_ns : int or None
+        A time farther than this from every truth frame selects none; ``None`` = half the truth's median period.
+
+    Returns
+    -------
+    list of GroundTruth
+        The selected frames, each once, in time order.
+
+    Raises
+    ------
+    EvaluationError
+        No truth frames, or a bad tolerance.
+    """
+    frames = sorted(gt, key=lambda f: f.t_ns)
+    if not frames:
+        raise EvaluationError("gt: expected at least one GroundTruth frame")
+    gt_t = np.array([f.t_ns for f in frames], dtype=np.int64)
+    t = np.fromiter((int(x) for x in times_ns), dtype=np.int64)
+    frame, _, inside = _nearest_frame(gt_t, t, _time_tolerance(gt_t, tolerance_ns))
+    return [frames[k] for k in np.unique(frame[inside]).tolist()]
 
 
 def evaluate_floor(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Track], threshold_m: float = 0.5,
