@@ -17,10 +17,12 @@ from matplotlib.path import Path as _MplPath
 
 from ..types import GroundTruth, TrackState
 from .mot import Metrics, evaluate_floor
+from .mot import truth_at as _frames_at
 
 __all__ = ["VEHICLE_CLASSES", "evaluate_vehicles", "identity_kept", "truth_at"]
 
 VEHICLE_CLASSES = ("car", "bicycle")
+_ANY_DISTANCE_NS = 2**62  # the nearest frame, however far
 
 
 def _inside(area: Any, xy: np.ndarray) -> np.ndarray:
@@ -40,18 +42,12 @@ def _edge_distance(area: Any, xy: np.ndarray) -> np.ndarray:
 
 def truth_at(frames: Sequence[GroundTruth], times_ns: Iterable[int], *, area: Any = None,
              classes: Sequence[str] = VEHICLE_CLASSES) -> list[GroundTruth]:
-    """For each distinct instant, the nearest truth frame, keeping the objects of ``classes`` inside ``area``."""
-    frames = sorted(frames, key=lambda g: g.t_ns)
+    """For each distinct instant, the nearest truth frame (:func:`fusiontrack.eval.truth_at`, however far), keeping
+    the objects of ``classes`` inside ``area``."""
     if not frames:
         return []
-    ft = np.array([g.t_ns for g in frames], np.int64)
-    t = np.unique(np.fromiter(times_ns, np.int64))
-    k = np.clip(np.searchsorted(ft, t), 1, len(ft) - 1) if len(ft) > 1 else np.zeros(t.size, np.intp)
-    if len(ft) > 1:
-        k = np.where(np.abs(ft[k - 1] - t) <= np.abs(ft[k] - t), k - 1, k)
     out = []
-    for i in np.unique(k):
-        g = frames[i]
+    for g in _frames_at(frames, times_ns, tolerance_ns=_ANY_DISTANCE_NS):
         keep = np.isin(np.array(g.classes), list(classes)) & _inside(area, g.positions_m)
         out.append(GroundTruth(g.t_ns, g.sensor, g.frame_id, g.ids[keep], g.positions_m[keep],
                                g.velocities_mps[keep], tuple(np.array(g.classes)[keep]),
