@@ -337,6 +337,44 @@ def test_a_merged_pair_seen_as_two_is_correlated_while_its_split_waits() -> None
     assert {s.track_id for s in trk.step(n * FRAME_NS, [])} == {1, 2}
 
 
+def test_a_merged_pair_seen_apart_beside_a_bystander_is_correlated() -> None:
+    """As above, but while the pair walks 0.5 m apart (each its own segment) it passes a standing bystander 0.55 m
+    beside the nearer walker: that walker's segment is in the bystander's gate too, so the merged target's gate no
+    longer holds detections found by it alone (B7 rule 2's split condition fails; the split waits). It still
+    holds a segment for each of its two members: they are seen apart, and their states say correlated (B7 rule 3),
+    as the measurement truth, which sees each walker in a segment of its own, says. (Before: merged.)"""
+    rng = np.random.default_rng(5)
+    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0)
+    n = 4 * 25
+    wide, _ = _parallel_walkers(n, 1.0)
+    close, _ = _parallel_walkers(n, 0.5)
+    bystander = np.array([4.8, 4.2])
+    events, sit_shared = [], []
+    for k in range(n):
+        t_ns = k * FRAME_NS
+        if 20 <= k < 45:
+            dets = [_fused(t_ns, wide[:, k])]
+        else:
+            pos = close[:, k] if 45 <= k < 70 else wide[:, k]
+            dets = [_detection(t_ns, np.array([p - FOOT_OFFSET, p + FOOT_OFFSET]), rng) for p in pos]
+        dets.append(_detection(t_ns, np.array([bystander - FOOT_OFFSET, bystander + FOOT_OFFSET]), rng))
+        states = trk.step(t_ns, dets)
+        events += trk.events
+        if 48 <= k < 70 and np.hypot(*(close[0, k] - bystander)) < 0.75:  # the nearer walker's segment in its gate
+            sit_shared.append({s.track_id: s.situation for s in states})
+    events += trk.finish()
+    merges = [e for e in events if e.kind == "merge"]
+    assert len(merges) == 1
+    assert len(sit_shared) >= 15
+    pair = merges[0].track_ids
+    assert [[sit[i] for i in pair] for sit in sit_shared] == [[Situation.CORRELATED] * 2] * len(sit_shared)
+    runs = [e for e in events if e.kind == "correlated" and e.track_ids[0] in merges[0].track_ids]
+    assert sorted(e.track_ids for e in runs) == sorted((i,) for i in merges[0].track_ids)  # one run each
+    for e in runs:
+        assert 45 * FRAME_NS <= e.t_ns <= 48 * FRAME_NS
+        assert e.t_end_ns >= 69 * FRAME_NS
+
+
 def test_one_frame_of_a_shared_segment_does_not_cut_a_correlated_run() -> None:
     """Two walkers 0.5 m apart side by side, each its own segment (correlated) for 3 s, but one segment for both
     in one scan at 1.6 s: a merge (B7 rule 1 at once, n_merge = 1), after which they are a merged target seen as two
