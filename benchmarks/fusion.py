@@ -143,12 +143,6 @@ def run_sim(name: str, seconds: float, seed: int, tmp: Path, bias: bool = True, 
     n_frames = seconds * FRAME_HZ
     out: dict[str, Any] = {"mean_present": sim.mean_present, "true_bias_deg": out_true[0] if out_true else math.nan}
 
-    # camera-only reports at the camera's 15 Hz: scored on the truth frames nearest to its images (truth_at)
-    cams = [c.name for c in scenario.config.cameras][:1]
-    with Recording(path) as rec:
-        image_t = [m.t_ns for m in rec.messages([f"/{cams[0]}/image"])] if cams else []
-    gt_camera = truth_at(gt, image_t) if image_t else gt
-
     def score(states: list[TrackState], seconds_spent: float, truth: list[GroundTruth] = gt) -> dict[str, Any]:
         m = evaluate_floor(truth, states, 0.5)
         return {"m": m, "splits": splits_resolved(gt, truth_events, states, t_warm),
@@ -169,10 +163,11 @@ def run_sim(name: str, seconds: float, seed: int, tmp: Path, bias: bool = True, 
         # through the camera fusion used (corrected by the bias it learnt, if it settled): both get the same camera
         corrected = stats.bias.corrected_camera if stats.bias is not None else "auto"
         t0 = time.process_time()
-        camera_states, _, _ = track_camera(path, camera=corrected)
+        camera_states, _, cam_stats = track_camera(path, camera=corrected)
         spent["camera"].append(time.process_time() - t0)
     out["laser"] = score(laser_states, min(spent["laser"]))
-    out["camera"] = score(camera_states, min(spent["camera"]), gt_camera)
+    # camera-only reports at the camera's 15 Hz: scored on the truth frames nearest to its images (truth_at)
+    out["camera"] = score(camera_states, min(spent["camera"]), truth_at(gt, cam_stats.frame_times_ns))
     out["fusion"] = score(fused, min(spent["fusion"]))
     out["stats"] = stats
     out["bias_cpu_s"] = min(bias_cpu) if bias_cpu else math.nan

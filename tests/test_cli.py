@@ -165,7 +165,7 @@ def test_track_and_eval_a_simulated_crossing(tmp_path):
     # three people crossing, two lasers, truth at 25 Hz: a laser tracker must get most of it right
     assert metrics["mota"] > 0.7
     assert metrics["id_switches"] <= 2
-    # --at: only the truth frames nearest to a topic's messages (here the heel strikes, 2-3 per 0.1 s) are scored
+    # --at: only the truth frames nearest to a topic's messages (here the heel strikes, about 5 a second) count
     at_json = tmp_path / "at.json"
     run("eval", str(out), str(rec), "--at", "/ground_truth/steps", "-o", str(at_json))
     at = json.loads(at_json.read_text())

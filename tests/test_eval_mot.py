@@ -566,3 +566,5 @@ def test_a_slower_tracker_is_scored_at_its_own_rate(caplog: pytest.LogCaptureFix
     assert [f.t_ns for f in truth_at(gt, [int(t_gt[3]) + 1, int(t_gt[3]) - 1, int(t_gt[1])])] == [t_gt[1], t_gt[3]]
     with pytest.raises(EvaluationError, match="at least one"):
         truth_at([], t_cam)
+    with pytest.raises(EvaluationError, match="two GroundTruth frames"):
+        truth_at([*gt, gt[5]], t_cam)

@@ -761,7 +761,8 @@ def eval_(
     at: Annotated[str | None, typer.Option("--at", help="Score floor-plane tracks on the ground-truth frames nearest "
                                            "to this topic's messages only (e.g. /camera_0/image for tracks made "
                                            "at a 15 Hz camera's rate against 25 Hz truth: otherwise the truth "
-                                           "frames between two of its frames count everybody as missed).")
+                                           "frames between two of its frames count everybody as missed); its "
+                                           "times as --time says.")
                   ] = None,
 ) -> None:
     """Score tracks against ground truth: MOTA, MOTP, IDF1, ID switches, HOTA, FP, FN, MT/ML (TrackEval).
@@ -775,8 +776,10 @@ def eval_(
     from .eval import evaluate_floor, evaluate_mot_files, metrics_table, situation_accuracy, situation_table, truth_at
 
     result: dict[str, Any] = {}
+    if at is not None and (camera is not None or tracks.suffix == ".txt"):
+        raise ConfigError("--at: only for floor-plane tracks (image boxes are scored at their camera's frames)")
     image = _eval_image_boxes(tracks, ground_truth, camera, time_source)
-    if at is not None and (image is not None or tracks.suffix == ".txt"):
+    if at is not None and image is not None:
         raise ConfigError("--at: only for floor-plane tracks (image boxes are scored at their camera's frames)")
     if image is not None:
         metrics, cam = image
@@ -793,9 +796,13 @@ def eval_(
         frames, gt_topic = _read_truth(ground_truth, topic, time_source)
         scored, label = frames, f"{tracks.name} vs {gt_topic}"
         if at is not None:
-            scored = truth_at(frames, _topic_times(ground_truth, at, time_source))
+            at_times = _topic_times(ground_truth, at, time_source)
+            if not at_times:
+                raise ConfigError(f"--at {at}: {ground_truth} has no message on it")
+            scored = truth_at(frames, at_times)
             if not scored:
-                raise ConfigError(f"--at {at}: no message of it is within half a frame of a {gt_topic} frame")
+                raise ConfigError(f"--at {at}: none of its {len(at_times)} messages is within half a {gt_topic} "
+                                  f"period of a {gt_topic} frame (check --time)")
             label += f" at {at}"
             result["at"] = {"topic": at, "frames": len(scored), "of": len(frames)}
         metrics = evaluate_floor(scored, states, threshold_m=threshold)
@@ -816,11 +823,19 @@ def eval_(
 
 
 def _topic_times(path: Path, topic: str, time_source: str) -> list[int]:
-    """The times of a recording's messages on ``topic`` (TopicError, naming it, if the recording has none)."""
+    """The times of the messages on ``topic`` in the recording at ``path``: their header stamps (or log times, as
+    ``--time`` says), read without converting the messages (no image is decoded). TopicError, naming the topic,
+    when the recording does not have it."""
     from .io.recording import Recording
+    from .io.ros import stamp_to_ns
 
+    times = []
     with Recording(path) as rec:
-        return [m.t_ns for m in rec.messages([topic], time_source=time_source)]
+        for _, _, log_ns, msg in rec.raw_messages([topic]):
+            header = getattr(msg, "header", None)
+            times.append((stamp_to_ns(header.stamp) or log_ns) if time_source == "header" and header is not None
+                         else log_ns)
+    return times
 
 
 def _eval_image_boxes(tracks: Path, recording: Path, camera: str | None, time_source: str) -> tuple[Any, str] | None:

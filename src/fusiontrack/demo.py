@@ -30,15 +30,6 @@ def _truth(path: Path) -> list[GroundTruth]:
         return [g for g in rec.messages(["/ground_truth"]) if isinstance(g, GroundTruth)]
 
 
-def _image_times(path: Path) -> list[int]:
-    """The stamps of the recording's camera images (none without a camera)."""
-    from .fusion.tracker import _image_topic
-
-    with Recording(path) as rec:
-        topic = _image_topic(rec, None)
-        return [] if topic is None else [m.t_ns for m in rec.messages([topic])]
-
-
 def _frames(states: list[TrackState]) -> int:
     return len({s.t_ns for s in states})
 
@@ -96,8 +87,7 @@ def people_comparison(recording: str | Path, output: str | Path, *, camera: str 
 
     # camera-only reports at the camera's rate: scored on the truth frames nearest to its images (truth_at), not
     # on the frames between them, where it has no report and would miss everybody
-    image_t = _image_times(recording)
-    at_camera = truth_at(truth, image_t) if image_t else truth
+    at_camera = truth_at(truth, cam_stats.frame_times_ns) if len(cam_stats.frame_times_ns) else truth
     metrics = {k: evaluate_floor(at_camera if k == "camera only" else truth, v, threshold_m=0.5)
                for k, v in runs.items()}
     # IDF1 ceiling: the IDF1 of the same positions with perfect identities (Metrics.idf1_ceiling), so the report

@@ -733,10 +733,12 @@ def _pair_d2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _own_detections(D: np.ndarray, found: np.ndarray, row: int) -> int:
-    """How many of the detections target ``row`` found are nearer to it than to any other target (``D``: gate
-    distances, targets x detections)."""
+    """How many of the detections target ``row`` found are nearer to it than to any other target that found them
+    (``D``: gate distances, targets x detections; ``found``: ``D < G``, so a NaN distance is no candidate)."""
     js = found[row].nonzero()[0]
-    return int(np.count_nonzero(D[:, js].argmin(axis=0) == row)) if js.size else 0
+    if not js.size:
+        return 0
+    return int(np.count_nonzero(np.where(found[:, js], D[:, js], np.inf).argmin(axis=0) == row))
 
 
 def _max_pair_distance(points: np.ndarray) -> float:
@@ -1285,9 +1287,9 @@ class LaserPeopleTracker:
         for i in (~gone_m).nonzero()[0].tolist():
             m = merged[i]
             lab = int(labels[n_w + i])
-            # its gate holds a detection for each member (B7 rule 2's split condition, or as many detections nearer
-            # to it than to any other target, when another target found one of them too): the members are seen
-            # apart, correlated (B7 rule 3), while the merged target holds
+            # its gate holds detections enough for its members (B7 rule 2's split condition, or as many detections
+            # nearer to it than to any other target as it has members, when another target found one of them too):
+            # the members are seen apart, correlated (B7 rule 3), while the merged target holds
             seen_apart = lab == _SPLITTING or (lab == _MERGED and c[n_w + i] == 2
                                                and _own_detections(D, found, n_w + i) >= len(m.info))
             if seen_apart:
