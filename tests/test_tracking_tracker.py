@@ -302,6 +302,16 @@ def test_a_segment_shared_for_one_or_two_frames_is_no_merge(n_merge: int, fused_
     assert {s.track_id for s in trk.step(n * FRAME_NS, [])} == {1, 2}  # the same two identities throughout
 
 
+def _merged_then_close(k: int, wide: np.ndarray, close: np.ndarray, rng: np.random.Generator) -> list[Detection]:
+    """Frame ``k`` of the pair below (``_parallel_walkers`` 1 m and 0.5 m apart): one segment between them 1 m apart
+    for k in [20, 45), each its own segment 0.5 m apart for k in [45, 70), each its own 1 m apart otherwise."""
+    t_ns = k * FRAME_NS
+    if 20 <= k < 45:
+        return [_fused(t_ns, wide[:, k])]
+    pos = close[:, k] if 45 <= k < 70 else wide[:, k]
+    return [_detection(t_ns, np.array([p - FOOT_OFFSET, p + FOOT_OFFSET]), rng) for p in pos]
+
+
 def test_a_merged_pair_seen_as_two_is_correlated_while_its_split_waits() -> None:
     """Two walkers 1 m apart are one segment for 1 s (merged), then each its own segment 0.5 m apart for 1 s (closer
     than split_min_m = 0.6: the split waits), then 1 m apart (split). While they are two segments inside one gate,
@@ -315,11 +325,7 @@ def test_a_merged_pair_seen_as_two_is_correlated_while_its_split_waits() -> None
     events, sit_close = [], []
     for k in range(n):
         t_ns = k * FRAME_NS
-        if 20 <= k < 45:
-            dets = [_fused(t_ns, wide[:, k])]
-        else:
-            pos = close[:, k] if 45 <= k < 70 else wide[:, k]
-            dets = [_detection(t_ns, np.array([p - FOOT_OFFSET, p + FOOT_OFFSET]), rng) for p in pos]
+        dets = _merged_then_close(k, wide, close, rng)
         states = trk.step(t_ns, dets)
         events += trk.events
         if 48 <= k < 70:
@@ -352,11 +358,7 @@ def test_a_merged_pair_seen_apart_beside_a_bystander_is_correlated() -> None:
     events, sit_shared = [], []
     for k in range(n):
         t_ns = k * FRAME_NS
-        if 20 <= k < 45:
-            dets = [_fused(t_ns, wide[:, k])]
-        else:
-            pos = close[:, k] if 45 <= k < 70 else wide[:, k]
-            dets = [_detection(t_ns, np.array([p - FOOT_OFFSET, p + FOOT_OFFSET]), rng) for p in pos]
+        dets = _merged_then_close(k, wide, close, rng)
         dets.append(_detection(t_ns, np.array([bystander - FOOT_OFFSET, bystander + FOOT_OFFSET]), rng))
         states = trk.step(t_ns, dets)
         events += trk.events
