@@ -185,6 +185,10 @@ def test_eval_of_mot_files_reproduces_tud_campus(shared_data, tmp_path):
     metrics = json.loads(out.read_text())["metrics"]
     assert round(100 * metrics["mota"], 1) == 52.6  # published: devkit README / py-motmetrics
     assert round(100 * metrics["idf1"], 1) == 55.8
+    boxes_at = subprocess.run([sys.executable, "-m", "fusiontrack", "eval", str(tud / "test.txt"), str(tud / "gt.txt"),
+                               "--at", "/camera_0/image"], capture_output=True, text=True, timeout=60)
+    assert boxes_at.returncode != 0
+    assert "--at: only for floor-plane tracks" in boxes_at.stderr
 
 
 def test_track_and_eval_the_real_outdoor_bag(outdoor_bag, tmp_path):

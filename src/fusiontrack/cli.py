@@ -776,11 +776,12 @@ def eval_(
     from .eval import evaluate_floor, evaluate_mot_files, metrics_table, situation_accuracy, situation_table, truth_at
 
     result: dict[str, Any] = {}
-    if at is not None and (camera is not None or tracks.suffix == ".txt"):
-        raise ConfigError("--at: only for floor-plane tracks (image boxes are scored at their camera's frames)")
+    boxes_at = ConfigError("--at: only for floor-plane tracks (image boxes are scored at their camera's frames)")
+    if at is not None and (camera is not None or tracks.suffix == ".txt"):  # refused before any scoring
+        raise boxes_at
     image = _eval_image_boxes(tracks, ground_truth, camera, time_source)
-    if at is not None and image is not None:
-        raise ConfigError("--at: only for floor-plane tracks (image boxes are scored at their camera's frames)")
+    if at is not None and image is not None:  # a people-camera output found by its folder
+        raise boxes_at
     if image is not None:
         metrics, cam = image
         console.print(metrics_table({f"{tracks.name} vs /ground_truth/{cam}": metrics},
