@@ -146,14 +146,40 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         (["convert", "{demo}", "-o", "{out}", "-t", "/scann"], "/scann"),
         (["convert", "{demo}", "-o", "{out}", "--config", "{cfg}"], "window_ms"),
         (["info", "{junk}"], "junk.bag"),
+        # a pipeline file's [laser] and [tracking] tables: the file, the table and the key, before any reading
+        (["track", "{demo}", "-o", "{out}", "-c", "{laser_typo}"], "laser_typo.toml: [laser]: unknown laser "
+                                                                   "detector parameter(s) min_segmnt_points; known:"),
+        (["track", "{demo}", "-o", "{out}", "-c", "{laser_neg}"], "[laser]: min_segment_points: expected an integer"),
+        (["track", "{demo}", "-o", "{out}", "-c", "{laser_text}"], "[laser]: alpha: expected a number, got 'x'"),
+        (["track", "{demo}", "-o", "{out}", "-c", "{tracking_typo}"], "tracking_typo.toml: [tracking]: unknown"),
+        # outputs of the wrong kind, named
+        (["track", "{demo}", "-o", "{a_file}"], "is a file"),
+        (["eval", "{tracks}", "{demo}", "-o", "{a_dir}"], "is a folder"),
+        (["fit-step-model", "walk.csv", "-l", "10", "-o", "{a_dir}"], "is a folder"),
+        # eval's own options
+        (["eval", "{tracks}", "{demo}", "--time", "lgo"], "--time: expected 'header' or 'log', got 'lgo'"),
+        (["eval", "{tracks}", "{demo}", "--topic", "/gt_wrong"], "/gt_wrong"),
     ],
 )
 def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args, expected):
+    from fusiontrack.io.tracks import write_tracks_csv
+    from fusiontrack.types import TrackState
+
     cfg = tmp_path / "p.toml"
     cfg.write_text("[sync]\nwindow_ms = 'soon'\n")
     junk = tmp_path / "junk.bag"
     junk.write_bytes(b"\x00" * 100)
-    subst = {"demo": str(shared_data / DEMO), "out": str(tmp_path / "o"), "cfg": str(cfg), "junk": str(junk)}
+    tables = {"laser_typo": "[laser]\nmin_segmnt_points = 10\n", "laser_neg": "[laser]\nmin_segment_points = -5\n",
+              "laser_text": "[laser]\nalpha = 'x'\n", "tracking_typo": "[tracking]\nnum_particles = 10\n"}
+    for name, text in tables.items():
+        (tmp_path / f"{name}.toml").write_text(text)
+    (tmp_path / "a_file").write_text("")
+    (tmp_path / "a_dir").mkdir()
+    tracks = tmp_path / "tracks.csv"
+    write_tracks_csv(tracks, [TrackState(10**18, "laser", 1, np.zeros(2), np.zeros(2))])
+    subst = {"demo": str(shared_data / DEMO), "out": str(tmp_path / "o"), "cfg": str(cfg), "junk": str(junk),
+             "a_file": str(tmp_path / "a_file"), "a_dir": str(tmp_path / "a_dir"), "tracks": str(tracks),
+             **{name: str(tmp_path / f"{name}.toml") for name in tables}}
     result = _cli(*[a.format(**subst) for a in args])
     assert result.returncode == 2
     lines = [ln for ln in result.stderr.splitlines() if ln.strip()]
@@ -202,3 +228,16 @@ def test_cli_help_on_every_command():
         assert "Usage" in sub.stdout
 
 
+
+
+def test_a_recording_without_lasers_points_to_the_camera_pipeline(shared_data):
+    """A TU/e RGB-D bag has camera images and no laser: the laser pipeline says so and names the image topics and the
+    pipeline that tracks people in them, with the bag's path as plain text."""
+    from fusiontrack.tracking.tracker import track_recording
+
+    bag = shared_data / "rgbd/tue_rgbd_people/2019-05-03-12-42-34.bag"
+    with pytest.raises(ConfigError, match="no sensor_msgs/LaserScan topic") as err:
+        track_recording(bag)
+    message = str(err.value)
+    assert message.startswith(f"{bag}:")
+    assert "/hero/head_rgbd_sensor/rgb/image_raw" in message and "--pipeline people-camera" in message

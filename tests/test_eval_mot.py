@@ -568,3 +568,31 @@ def test_a_slower_tracker_is_scored_at_its_own_rate(caplog: pytest.LogCaptureFix
         truth_at([], t_cam)
     with pytest.raises(EvaluationError, match="two GroundTruth frames"):
         truth_at([*gt, gt[5]], t_cam)
+
+
+def test_tracks_on_another_clock_are_named(caplog: pytest.LogCaptureFixture) -> None:
+    """A bag's header stamps and log times can differ by minutes (the leg_tracker outdoor bag: 130 s). Tracks made on
+    one and truth read on the other overlap in time, so nothing is dropped, yet each track is compared with where its
+    person was 130 s before: the evaluation warns. A tracker that starts 2 s late (learning its backgrounds) but ends
+    with the truth is on the truth's clock: no warning."""
+    dt = 100_000_000  # 10 Hz, 300 s
+    t_gt = T0_NS + dt * np.arange(3000)
+
+    def walk(t_ns: int) -> np.ndarray:  # a person walking along x at 1 m/s
+        return np.array([1e-9 * (t_ns - T0_NS), 0.0])
+
+    gt = [GroundTruth(t_ns=int(t), sensor="sim", frame_id="world", ids=np.array([1]), positions_m=walk(t)[None])
+          for t in t_gt]
+    shift = 130 * 10**9
+    shifted = [TrackState(t_ns=int(t - shift), sensor="laser", track_id=7, position_m=walk(t), cls="person")
+               for t in t_gt]
+    with caplog.at_level("WARNING", logger="fusiontrack.eval.mot"):
+        evaluate_floor(gt, shifted, 0.5)
+    assert "the tracks start -130.0 s and end -130.0 s from the ground truth's start and end" in caplog.text
+    caplog.clear()
+    late = [TrackState(t_ns=int(t), sensor="laser", track_id=7, position_m=walk(t), cls="person")
+            for t in t_gt[20:]]
+    with caplog.at_level("WARNING", logger="fusiontrack.eval.mot"):
+        m = evaluate_floor(gt, late, 0.5)
+    assert caplog.text == ""
+    assert (m.fn, m.fp) == (20, 0)

@@ -346,10 +346,41 @@ def test_unknown_sensor_and_bad_configuration_are_reported_by_name() -> None:
         LaserPeopleDetector({"skew": np.array([[1.0, 0.5, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])})
     for kwargs, name in [({"alpha": 2.0}, "alpha"), ({"bandwidth_m": 0.0}, "bandwidth_m"),
                          ({"c0_m": -1.0}, "c0_m"), ({"max_age_s": -1.0}, "max_age_s"),
-                         ({"min_sigma_m": np.nan}, "min_sigma_m"), ({"min_segment_points": 0}, "n_min"),
-                         ({"n_init": 0}, "n_init")]:
+                         ({"min_sigma_m": np.nan}, "min_sigma_m"),
+                         ({"min_segment_points": 0}, "min_segment_points"),
+                         ({"min_cluster_points": 1.5}, "min_cluster_points"), ({"n_init": 0}, "n_init")]:
         with pytest.raises(ValueError, match=name):
             _detector(**kwargs)
+
+
+def test_a_pipeline_files_laser_table_is_checked_by_key() -> None:
+    """``check_detector_params`` (the CLI's [laser] table): an unknown key is named with every known one, a bad value
+    with its key, also when TOML gave text for a number; good values pass through."""
+    from fusiontrack.laser.detector import check_detector_params
+
+    with pytest.raises(ConfigError, match=r"^p.toml: \[laser\]: unknown .* min_segmnt_points; known: .*min_segment"):
+        check_detector_params({"min_segmnt_points": 10}, "p.toml: [laser]")
+    for kwargs, name in [({"min_segment_points": -5}, "min_segment_points"), ({"alpha": "x"}, "alpha"),
+                         ({"pair_feet_m": "far"}, "pair_feet_m"), ({"max_age_s": True}, "max_age_s"),
+                         ({"init": "mean"}, "init"), ({"c0_m": -1.0}, "c0_m")]:
+        with pytest.raises(ConfigError, match=rf"^laser: {name}: "):
+            check_detector_params(kwargs)
+    good = {"min_segment_points": 10, "alpha": 0.01, "init": "median", "pair_feet_m": None}
+    assert check_detector_params(good) == good
+    assert check_detector_params(None) == {}
+
+
+def test_scanners_without_poses_are_named(shared_data: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """leg_tracker's negative_2.bag has three scanners and no /tf_static: each is taken at the world origin, where
+    their detections cannot line up, and the user is told which."""
+    from fusiontrack.laser.detector import detector_for_recording
+
+    with Recording(shared_data / "laser/leg_tracker_demo/training/negative_2.bag") as rec, \
+            caplog.at_level(logging.WARNING, logger="fusiontrack.laser.detector"):
+        _, poses = detector_for_recording(rec, ["/left_scan", "/rear_scan", "/right_scan"])
+    assert all(np.array_equal(T, np.eye(4)) for T in poses.values())
+    assert "no /tf_static transform from" in caplog.text
+    assert all(name in caplog.text for name in poses)
 
 
 def test_ten_people_standing_are_found_in_every_frame() -> None:

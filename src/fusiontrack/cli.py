@@ -190,6 +190,41 @@ def _load_config(path: Path | None) -> Any:
     return load_config(path) if path is not None else PipelineConfig()
 
 
+def _check_time(time_source: str) -> None:
+    if time_source not in ("header", "log"):
+        raise ConfigError(f"--time: expected 'header' or 'log', got {time_source!r}")
+
+
+def _out_folder(path: Path) -> Path:
+    """``--output`` that names a folder to write into: refused, naming it, when it is an existing file."""
+    if path.exists() and not path.is_dir():
+        raise ConfigError(f"--output {path}: is a file; give a folder to write into")
+    return path
+
+
+def _out_file(path: Path, example: str) -> Path:
+    """``--output`` that names a file: refused, naming it, when it is an existing folder."""
+    if path.is_dir():
+        raise ConfigError(f"--output {path}: is a folder; give a file name (e.g. {path / example})")
+    return path
+
+
+def _check_laser_tables(cfg: Any, config: Path | None, tracker_kind: str) -> None:
+    """A pipeline file's [laser] and [tracking] tables checked before any reading, errors naming the file."""
+    from .laser.detector import check_detector_params
+
+    where = f"{config}: " if config is not None else ""
+    if cfg.laser:
+        check_detector_params(cfg.laser, f"{where}[laser]")
+    if cfg.tracking and tracker_kind == "pf":
+        from .tracking.tracker import TrackerParams
+
+        try:
+            TrackerParams().replace(**cfg.tracking)
+        except ConfigError as err:
+            raise ConfigError(f"{where}[tracking]: {err}") from None
+
+
 @app.command()
 def convert(
     recordings: Annotated[list[Path], typer.Argument(help="Input bags (ROS 1 or ROS 2, several are merged).")],
@@ -407,8 +442,8 @@ def track(
 
     if pipeline not in PIPELINES:
         raise ConfigError(f"--pipeline: expected one of {', '.join(PIPELINES)}, got {pipeline!r}")
-    if time_source not in ("header", "log"):
-        raise ConfigError(f"--time: expected 'header' or 'log', got {time_source!r}")
+    _check_time(time_source)
+    _out_folder(output)
     traffic_only = {"--geometry": geometry is not None, "--rules": rules is not None, "--compare": compare,
                     "--calibration": calibration is not None, "--scene": scene != "rules",
                     "--workers": workers is not None}
@@ -457,6 +492,7 @@ def track(
     from .tracking.tracker import track_recording
 
     cfg = _load_config(config)
+    _check_laser_tables(cfg, config, tracker_kind)
     topics = [s.topic for s in cfg.sensors.values() if s.kind == "laser"] or None
     area_m: Any = {"auto": "auto", "none": None}.get(area)
     if area_m is None and area != "none":
@@ -627,6 +663,8 @@ def events(
 
     if (geometry is None) == (world is None):
         raise ConfigError("events: give the road as --geometry FILE.toml or --world world.json (exactly one)")
+    if output is not None:
+        _out_file(output, "events.jsonl")
     if geometry is not None:
         geo = load_road_geometry(geometry)
     else:
@@ -722,6 +760,8 @@ def _read_truth(path: Path, topic: str | None, time_source: str) -> tuple[list[A
             if topic is None:
                 raise ConfigError(f"{path}: say which ground-truth topic to use with --topic "
                                   f"(found {', '.join(candidates) or 'none'})")
+        if topic not in info:
+            raise ConfigError(f"--topic {topic}: {path} has no such topic; it has: {', '.join(sorted(info))}")
         if info[topic].msgtype == "leg_tracker/msg/Person":
             # leg_tracker's annotators' rule: the Person messages that follow scan k belong to scan k
             from .io.recording import LASERSCAN
@@ -775,6 +815,9 @@ def eval_(
     """
     from .eval import evaluate_floor, evaluate_mot_files, metrics_table, situation_accuracy, situation_table, truth_at
 
+    _check_time(time_source)
+    if output is not None:
+        _out_file(output, "metrics.json")
     result: dict[str, Any] = {}
     boxes_at = ConfigError("--at: only for floor-plane tracks (image boxes are scored at their camera's frames)")
     if at is not None and (camera is not None or tracks.suffix == ".txt"):  # refused before any scoring
@@ -1000,6 +1043,7 @@ def calibrate_road_command(
     from .io.recording import Recording
     from .types import CameraInfo
 
+    _out_file(output, "road_calibration.json")
     lens_models: dict[str, CameraInfo] = {}
     if lenses is not None:
         with Recording(lenses) as rec:
@@ -1039,6 +1083,8 @@ def train_classifier(
 
     if rounds < 1:
         raise ConfigError(f"--rounds: expected >= 1, got {rounds}")
+    if output is not None:
+        _out_file(output, "object_classifier.json")
     with console.status("training") as status:
         model, report = train_default(work, crowd_seconds=crowd_seconds, road_seconds=road_seconds, data_dir=data,
                                       n_rounds=rounds, progress=lambda msg: status.update(msg))
@@ -1067,6 +1113,7 @@ def pdr(
     """Pedestrian dead reckoning from a phone's IMU (seed 002): steps, step lengths, headings, positions."""
     from .inertial import pdr_from_file, write_pdr
 
+    _out_folder(output)
     result = pdr_from_file(source, step_model, sensor=sensor)
     paths = write_pdr(result, output)
     gyro = "" if result.has_gyro else " (no gyroscope: headings held constant)"
@@ -1087,6 +1134,7 @@ def fit_step_model(
 
     if len(length) != len(walks):
         raise ConfigError(f"--length: expected one per walk ({len(walks)}), got {len(length)}")
+    _out_file(output, "step_model.json")
     model = step_model_from_files(walks, length, subject=subject)
     model.save(output)
     console.print(f"step length = {model.intercept_m:.3f} m + {model.slope_mps:.3f} m/s x duration "

@@ -490,6 +490,7 @@ def _floor_sequence(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Tra
             t_dup, id_dup = pair[0][np.argmax(pair[1] > 1)].tolist()
             raise EvaluationError(f"tracks: two states of track {id_dup} at t_ns={t_dup}")
     _warn_if_slower(gt_t, st_t, name)
+    _warn_if_shifted(gt_t, st_t, name)
     frame, dt, inside = _nearest_frame(gt_t, st_t, time_tolerance_ns)
     frame, dt, st_t, st_id, st_xy = frame[inside], dt[inside], st_t[inside], st_id[inside], st_xy[inside]
     order = np.lexsort((st_t, dt, st_id, frame))  # by frame, id, then nearest (earlier on a tie)
@@ -499,13 +500,29 @@ def _floor_sequence(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Tra
     frame, st_id, st_xy = frame[first], st_id[first], st_xy[first]
     n_dropped = int(inside.size - inside.sum())
     if n_dropped:
-        logger.debug("%s: %d track states farther than %d ns from every ground-truth frame are not evaluated",
-                     name, n_dropped, time_tolerance_ns)
+        # most states far from every truth frame: the two are on different clocks (header stamps against log times)
+        log_at = logging.WARNING if 2 * n_dropped > inside.size else logging.DEBUG
+        logger.log(log_at, "%s: %d of %d track states are farther than %.0f ms from every ground-truth frame and are "
+                   "not scored%s", name, n_dropped, inside.size, time_tolerance_ns / 1e6,
+                   ": are the tracks and the ground truth on one clock (header stamps or log times: fusiontrack "
+                   "eval --time)?" if log_at == logging.WARNING else "")
 
     bounds = np.searchsorted(frame, np.arange(n_t + 1))
     tr_ids = [st_id[bounds[k]:bounds[k + 1]] for k in range(n_t)]
     sims = [floor_similarity(gt_pos[k], st_xy[bounds[k]:bounds[k + 1]], threshold_m) for k in range(n_t)]
     return _Sequence(name, gt_ids, tr_ids, sims)
+
+
+def _warn_if_shifted(gt_t: np.ndarray, st_t: np.ndarray, name: str) -> None:
+    """Log a warning when the tracks start and end well before (or after) the ground truth, by about as much: the two
+    are on different clocks (e.g. tracks on a bag's log times against truth on its header stamps), and every track
+    is then compared with where the people were at another time."""
+    if gt_t.size < 2 or st_t.size < 2:
+        return
+    d0, d1 = float(st_t.min() - gt_t[0]), float(st_t.max() - gt_t[-1])
+    if d0 * d1 > 0 and min(abs(d0), abs(d1)) > max(1e9, 0.02 * float(gt_t[-1] - gt_t[0])):
+        logger.warning("%s: the tracks start %+.1f s and end %+.1f s from the ground truth's start and end: are they "
+                       "on one clock (header stamps or log times: fusiontrack eval --time)?", name, d0 / 1e9, d1 / 1e9)
 
 
 def _warn_if_slower(gt_t: np.ndarray, st_t: np.ndarray, name: str) -> None:

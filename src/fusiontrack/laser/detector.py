@@ -30,6 +30,7 @@ Timing assumptions
 
 from __future__ import annotations
 
+import inspect
 import logging
 import math
 from collections.abc import Iterable, Mapping
@@ -42,7 +43,7 @@ from fusiontrack.laser.background import BeamBackground, InitMethod
 from fusiontrack.laser.clustering import Segments, cluster_scan, mean_shift_segments
 from fusiontrack.types import Detection, LaserScan
 
-__all__ = ["LaserPeopleDetector", "detector_for_recording", "planar_pose"]
+__all__ = ["LaserPeopleDetector", "check_detector_params", "detector_for_recording", "planar_pose"]
 
 log = logging.getLogger(__name__)
 
@@ -126,6 +127,9 @@ class LaserPeopleDetector:
                           for name, T in scanners.items()}
         self._bg_args = {"alpha": alpha, "beta": beta, "tau_fg_m": tau_fg_m, "n_init": n_init, "init": init,
                          "bin_m": bin_m, "gamma": gamma}
+        for name, v in (("min_cluster_points", min_cluster_points), ("min_segment_points", min_segment_points)):
+            if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
+                raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
         BeamBackground(1, **self._bg_args)  # validate the background parameters now, not at the first scan
         # Validate the clustering parameters once, on empty input.
         cluster_scan(np.zeros(0), 0.0, 0.01, c0_m=c0_m, n_min=min_cluster_points)
@@ -326,6 +330,36 @@ class LaserPeopleDetector:
 _BACKGROUND_ARGS = ("alpha", "beta", "gamma", "tau_fg_m", "n_init", "init", "bin_m")
 
 
+def check_detector_params(params: Mapping[str, Any] | None, source: str = "laser") -> dict[str, Any]:
+    """The keyword arguments of :class:`LaserPeopleDetector` in ``params`` (a pipeline file's ``[laser]`` table),
+    checked: an unknown key or a bad value raises :class:`~fusiontrack.errors.ConfigError` naming ``source``, the
+    key and (for an unknown key) the known ones.
+
+    Returns
+    -------
+    dict
+        A copy of ``params`` (empty for ``None``).
+    """
+    out = dict(params or {})
+    signature = inspect.signature(LaserPeopleDetector).parameters
+    known = [k for k in signature if k != "scanners"]
+    unknown = sorted(set(out) - set(known))
+    if unknown:
+        raise ConfigError(f"{source}: unknown laser detector parameter(s) {', '.join(map(str, unknown))}; known: "
+                          f"{', '.join(sorted(known))}")
+    for key, value in out.items():  # numbers given as text: named here (the converters' messages name no key)
+        default = signature[key].default
+        numeric = key in ("gamma", "merge_m", "pair_feet_m") or (
+            isinstance(default, int | float) and not isinstance(default, bool))
+        if numeric and isinstance(value, str | bool):
+            raise ConfigError(f"{source}: {key}: expected a number, got {value!r}")
+    try:
+        LaserPeopleDetector({"check": np.eye(3)}, **out)
+    except (ValueError, TypeError) as err:
+        raise ConfigError(f"{source}: {err}") from None
+    return out
+
+
 def detector_for_recording(rec: Any, lasers: list[str], *, time_source: str = "header", world_frame: str = "world",
                            background: str = "learn", detector_params: Mapping[str, Any] | None = None,
                            ) -> tuple[LaserPeopleDetector, dict[str, np.ndarray]]:
@@ -356,6 +390,7 @@ def detector_for_recording(rec: Any, lasers: list[str], *, time_source: str = "h
 
     if background not in ("learn", "none"):
         raise ConfigError(f"background: expected 'learn' or 'none', got {background!r}")
+    dparams = check_detector_params(detector_params)
     tree = TransformTree()
     if "/tf_static" in rec.topic_types():
         for tf in rec.messages(["/tf_static"]):
@@ -369,16 +404,23 @@ def detector_for_recording(rec: Any, lasers: list[str], *, time_source: str = "h
         if len(first) == len(lasers):
             break
     poses: dict[str, np.ndarray] = {}
+    unposed = []
     for sensor, scan in first.items():
-        pose = np.eye(4)
+        pose = None
         for frame in (scan.frame_id, sensor):
             if frame and tree.has_path(frame, world_frame):
                 pose = tree.get(frame, world_frame)
                 break
-        poses[sensor] = pose
+        if pose is None:
+            unposed.append(sensor)
+        poses[sensor] = np.eye(4) if pose is None else pose
     if not poses:
-        raise ConfigError(f"{rec.paths[0]}: the laser topics {lasers} hold no scans")
-    dparams = dict(detector_params or {})
+        raise ConfigError(f"{rec.paths[0]}: the laser topics {', '.join(lasers)} hold no scans")
+    if len(poses) > 1 and unposed:
+        log.warning("%s: no /tf_static transform from %s to %r, so %s at the world origin: the %d scanners' "
+                    "detections will not line up (record /tf_static, or name one scanner in a pipeline file's "
+                    "[sensors])", rec.paths[0], ", ".join(unposed), world_frame,
+                    "they are taken" if len(unposed) > 1 else "it is taken", len(poses))
     if background == "none":
         dparams = {"alpha": 0.0, "gamma": 0.0, **dparams}
     detector = LaserPeopleDetector(poses, **dparams)

@@ -1906,7 +1906,12 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
         info = rec.topics()
         lasers = [t for t, i in info.items() if i.msgtype == LASERSCAN] if topics is None else list(topics)
         if not lasers:
-            raise ConfigError(f"{path}: no sensor_msgs/LaserScan topic to track")
+            images = [t for t, i in info.items() if i.msgtype in ("sensor_msgs/msg/Image",
+                                                                  "sensor_msgs/msg/CompressedImage")]
+            hint = (f" (it has images on {', '.join(images)}: --pipeline people-camera tracks people in them)"
+                    if images else "")
+            raise ConfigError(f"{', '.join(str(q) for q in rec.paths)}: no sensor_msgs/LaserScan topic to "
+                              f"track{hint}")
         total = sum(info[t].count for t in lasers if t in info)
         if background not in ("prime", "learn", "none"):
             raise ConfigError(f"background: expected 'prime', 'learn' or 'none', got {background!r}")
