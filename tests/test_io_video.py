@@ -2,13 +2,21 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
 from fusiontrack.errors import ConfigError, RecordingError
-from fusiontrack.io.video import VideoReader, read_frame_times_csv, write_video
+from fusiontrack.io.video import (
+    VIDEO_WRITE_SUFFIXES,
+    VideoReader,
+    check_video_output,
+    read_frame_times_csv,
+    write_video,
+)
 from fusiontrack.types import Image
 
 PETS = Path("/work/shared/data/video/pets09_s2l1/vtest_pets09_s2l1_480x360.avi")
@@ -177,5 +185,80 @@ def test_write_errors(tmp_path: Path) -> None:
         write_video(tmp_path / "float.avi", [np.zeros((10, 10, 3))], fps=10)
     with pytest.raises(ConfigError, match="fps"):
         write_video(tmp_path / "fps.avi", _frames(1), fps=-1)
-    with pytest.raises(RecordingError, match="does not exist"):
-        write_video(tmp_path / "no_dir" / "x.avi", _frames(1), fps=10)
+
+
+def _never_read() -> Iterator[np.ndarray]:
+    raise AssertionError("write_video read a frame before checking its output path")
+    yield np.zeros((1, 1, 3), np.uint8)
+
+
+def test_write_to_a_folder_is_a_config_error_naming_it(tmp_path: Path) -> None:
+    folder = tmp_path / "videos"
+    folder.mkdir()
+    with pytest.raises(ConfigError) as err:
+        write_video(folder, _never_read(), fps=10)
+    assert str(err.value).startswith(f"{folder}: is a folder")
+    assert ".mp4" in str(err.value)  # says what to give instead
+    assert list(folder.iterdir()) == []
+
+
+@pytest.mark.parametrize("name", ["out.gif", "out", "out.MP3"])
+def test_write_with_an_unsupported_suffix_lists_the_supported_ones(tmp_path: Path, name: str) -> None:
+    path = tmp_path / name
+    with pytest.raises(ConfigError) as err:
+        write_video(path, _never_read(), fps=10)
+    message = str(err.value)
+    assert message.startswith(f"{path}: ")
+    assert ("no file suffix" if name == "out" else f"suffix {path.suffix!r}") in message
+    for suffix in VIDEO_WRITE_SUFFIXES:
+        assert suffix in message
+    assert "MJPG" not in message
+    assert not path.exists()
+
+
+def test_write_into_a_missing_folder_names_the_folder(tmp_path: Path) -> None:
+    path = tmp_path / "no_dir" / "x.avi"
+    with pytest.raises(ConfigError) as err:
+        write_video(path, _never_read(), fps=10)
+    assert str(err.value).startswith(f"{path}: folder {tmp_path / 'no_dir'} does not exist")
+    assert not (tmp_path / "no_dir").exists()
+
+
+def test_check_video_output_returns_the_codec_and_accepts_any_case(tmp_path: Path) -> None:
+    assert check_video_output(tmp_path / "a.MP4") == "mp4v"
+    assert check_video_output(tmp_path / "a.avi") == "MJPG"
+    assert check_video_output(tmp_path / "a.webm") == "VP80"
+    assert check_video_output(tmp_path / "a.gif", fourcc="MJPG") == "MJPG"  # an explicit codec: the caller's call
+    with pytest.raises(ConfigError, match="fourcc: expected four characters"):
+        check_video_output(tmp_path / "a.avi", fourcc="MJPEG")
+
+
+def test_a_codec_opencv_cannot_encode_is_a_recording_error_without_a_suffix_hint(tmp_path: Path) -> None:
+    # "ZZZZ" is no codec FFmpeg knows: the writer does not open
+    path = tmp_path / "x.avi"
+    with pytest.raises(RecordingError) as err:
+        write_video(path, _frames(2), fps=10, fourcc="ZZZZ")
+    message = str(err.value)
+    assert message.startswith(f"{path}: OpenCV cannot write a video with codec 'ZZZZ'")
+    assert "another fourcc" in message
+    assert "suffix" not in message
+
+
+def test_webm_round_trip_is_vp8_in_a_webm_container(tmp_path: Path) -> None:
+    path = tmp_path / "clip.webm"
+    try:
+        write_video(path, _frames(6), fps=10)
+    except RecordingError:
+        pytest.skip("this OpenCV build cannot encode VP8")
+    head = path.read_bytes()[:64]
+    assert head[:4] == b"\x1a\x45\xdf\xa3"  # EBML magic (Matroska/WebM)
+    assert b"webm" in head  # DocType
+    cap = cv2.VideoCapture(str(path))
+    fourcc = int(cap.get(cv2.CAP_PROP_FOURCC))
+    cap.release()
+    assert fourcc.to_bytes(4, "little") == b"VP80"
+    with VideoReader(path) as video:
+        assert (video.frame_count, video.width, video.height) == (6, 64, 48)
+        images = list(video)
+    for im, f in zip(images, _frames(6), strict=True):
+        assert np.abs(im.pixels.astype(int) - f).mean() < 6

@@ -31,7 +31,7 @@ from ..errors import ConfigError, RecordingError
 from ..types import Image
 from .csvtable import read_numeric_table
 
-__all__ = ["VideoReader", "read_frame_times_csv", "write_video"]
+__all__ = ["VIDEO_WRITE_SUFFIXES", "VideoReader", "check_video_output", "read_frame_times_csv", "write_video"]
 
 logger = logging.getLogger(__name__)
 
@@ -268,7 +268,42 @@ class VideoReader:
                 f"{self._width}x{self._height} @ {self._fps:g} fps)")
 
 
-_FOURCC_BY_SUFFIX = {".mp4": "mp4v", ".m4v": "mp4v", ".mov": "mp4v", ".avi": "MJPG", ".mkv": "MJPG"}
+# The codec each supported suffix gets: what opencv-python's FFmpeg can encode (checked with 5.0.0, whose wheel
+# has no H.264 (``avc1``/``H264``) encoder), so ``.mp4`` gets MPEG-4 Part 2, which desktop players
+# read but browsers do not; ``.webm`` (VP8) is the one a browser's <video> plays.
+_FOURCC_BY_SUFFIX = {".mp4": "mp4v", ".m4v": "mp4v", ".mov": "mp4v", ".avi": "MJPG", ".mkv": "MJPG",
+                     ".webm": "VP80"}
+VIDEO_WRITE_SUFFIXES = tuple(_FOURCC_BY_SUFFIX)
+"""The file suffixes :func:`write_video` picks a codec for."""
+
+
+def check_video_output(path: str | Path, fourcc: str | None = None) -> str:
+    """Check that :func:`write_video` can create ``path``, before any frame is made; returns the fourcc.
+
+    Raises
+    ------
+    ConfigError
+        ``path`` is a folder, has no suffix or one without a codec (when ``fourcc`` is not given), or its
+        folder does not exist; ``fourcc`` is not four characters. The message names the path.
+    """
+    path = Path(path)
+    supported = ", ".join(VIDEO_WRITE_SUFFIXES)
+    if path.is_dir():
+        raise ConfigError(f"{path}: is a folder; expected a video file name ending in one of {supported} "
+                          f"(e.g. {path / 'video.mp4'})")
+    suffix = path.suffix.lower()
+    if fourcc is None and suffix not in _FOURCC_BY_SUFFIX:
+        what = f"suffix {path.suffix!r} is not a video format fusiontrack writes" if suffix else "no file suffix"
+        raise ConfigError(f"{path}: {what}; expected one of {supported}")
+    if fourcc is not None and not suffix:
+        raise ConfigError(f"{path}: no file suffix (the suffix picks the container); expected e.g. {supported}")
+    code = fourcc if fourcc is not None else _FOURCC_BY_SUFFIX[suffix]
+    if len(code) != 4:
+        raise ConfigError(f"fourcc: expected four characters, got {code!r}")
+    if not path.parent.is_dir():
+        what = "is a file, not a folder" if path.parent.exists() else "does not exist"
+        raise ConfigError(f"{path}: folder {path.parent} {what} (create it first; cannot write the video)")
+    return code
 
 
 def write_video(
@@ -280,7 +315,9 @@ def write_video(
     ----------
     path : str or Path
         Output file; its folder must exist. The suffix picks the codec unless ``fourcc`` is given:
-        ``.mp4``/``.m4v``/``.mov`` -> ``mp4v`` (MPEG-4 part 2), ``.avi``/``.mkv`` and others -> ``MJPG``.
+        ``.mp4``/``.m4v``/``.mov`` -> ``mp4v`` (MPEG-4 Part 2, which browsers do not play),
+        ``.avi``/``.mkv`` -> ``MJPG``, ``.webm`` -> ``VP80`` (VP8, which browsers play; several times
+        slower to encode). Other suffixes are refused unless ``fourcc`` is given.
     frames_bgr : iterable of (H, W, 3) uint8 BGR arrays, (H, W) uint8 grey arrays or Image records
         All of the size of the first frame.
     fps : float
@@ -296,18 +333,16 @@ def write_video(
     Raises
     ------
     ConfigError
-        ``fps`` not positive, ``fourcc`` not four characters, no frames, or a frame of the wrong size or type.
+        Before any frame is read: ``path`` is a folder, its suffix is not supported, its folder does not
+        exist (see :func:`check_video_output`), ``fps`` not positive or ``fourcc`` not four characters.
+        While writing: no frames, or a frame of the wrong size or type.
     RecordingError
-        OpenCV cannot create the file.
+        OpenCV cannot encode with the codec (its build lacks the encoder, or the container refuses it).
     """
     path = Path(path)
     if not (np.isfinite(fps) and fps > 0):
         raise ConfigError(f"fps: expected a positive frame rate, got {fps!r}")
-    code = fourcc or _FOURCC_BY_SUFFIX.get(path.suffix.lower(), "MJPG")
-    if len(code) != 4:
-        raise ConfigError(f"fourcc: expected four characters, got {code!r}")
-    if not path.parent.is_dir():
-        raise RecordingError(f"{path}: folder {path.parent} does not exist (cannot write the video)")
+    code = check_video_output(path, fourcc)
     writer: cv2.VideoWriter | None = None
     size: tuple[int, int] | None = None
     n = 0
@@ -324,8 +359,9 @@ def write_video(
                 size = (int(pixels.shape[1]), int(pixels.shape[0]))
                 writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*code), float(fps), size)
                 if not writer.isOpened():
+                    hint = "another fourcc" if fourcc is not None else "another suffix, e.g. .avi or .mp4"
                     raise RecordingError(f"{path}: OpenCV cannot write a video with codec {code!r} "
-                                         "(try another suffix or fourcc)")
+                                         f"(this OpenCV build may lack its encoder; try {hint})")
             elif (pixels.shape[1], pixels.shape[0]) != size:
                 raise ConfigError(f"frames_bgr[{n}]: size {pixels.shape[1]}x{pixels.shape[0]}, expected "
                                   f"{size[0]}x{size[1]} like the first frame")

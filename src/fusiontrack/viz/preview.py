@@ -18,7 +18,7 @@ import numpy as np
 from ..errors import ConfigError, RecordingError
 from ..geometry import TransformTree, scan_to_points, transform_points
 from ..io.recording import Recording
-from ..io.video import write_video
+from ..io.video import check_video_output, write_video
 from ..types import GroundTruth, Image, LaserScan, TrackState, Transform
 from .birdseye import BirdseyeView
 
@@ -70,6 +70,7 @@ def render_preview(
     ``tracks`` (world frame, or the laser frame for a recording without poses) are drawn as filled
     squares with their id and a short trail, on top of the ground truth's open circles.
     """
+    check_video_output(output)  # a folder, an unknown suffix or a missing folder: say so before reading anything
     paths = [recording] if isinstance(recording, Path | str) else list(recording)
     with Recording(paths) as rec:
         topics = rec.topics()

@@ -8,6 +8,12 @@ One file a user can open or mail: figures are embedded as base64 PNGs, so only t
     report.figure("Events", events_timeline(events, truth))
     report.video("Bird's-eye view", "tracks.mp4")
     report.write(out / "report.html")
+
+Browsers do not play the ``.mp4`` files fusiontrack writes: opencv-python's FFmpeg has no H.264 encoder, so
+they hold MPEG-4 Part 2 (``mp4v``). :meth:`Report.write` therefore makes a WebM (VP8) copy beside each linked
+video (``tracks.mp4`` -> ``tracks.webm``, remade only when older than the video) and embeds it as the first
+``<source>``, the original as the second, with a download link under the player. When the copy cannot be made
+(no VP8 encoder, or the video is not there when the report is written), the report says so under the player.
 """
 
 from __future__ import annotations
@@ -15,16 +21,62 @@ from __future__ import annotations
 import base64
 import html
 import io
+import logging
 import math
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..errors import FusiontrackError, RecordingError
 from ..types import Event
 
-__all__ = ["Report", "events_timeline"]
+__all__ = ["Report", "browser_video", "events_timeline"]
+
+logger = logging.getLogger(__name__)
+
+_BROWSER_SUFFIX = ".webm"  # VP8 in WebM: the browser-playable video opencv-python can write
+_MIME = {".webm": "video/webm", ".mp4": "video/mp4", ".m4v": "video/mp4", ".mov": "video/quicktime"}
+
+
+def browser_video(video: str | Path, target: str | Path | None = None) -> Path:
+    """A WebM (VP8) copy of ``video`` that browsers play, written beside it (same name, ``.webm``) by default.
+
+    ``video`` itself is returned when it is the target (a ``.webm``); an existing copy no older than ``video`` is
+    reused.
+
+    Raises
+    ------
+    RecordingError
+        ``video`` is missing or cannot be read, or this OpenCV build cannot encode VP8 (no partial copy is left).
+    ConfigError
+        ``target``'s folder does not exist.
+    """
+    from ..io.video import VideoReader, write_video
+
+    video = Path(video)
+    if not video.is_file():
+        raise RecordingError(f"{video}: no such video file (cannot make a browser-playable copy)")
+    out = Path(target) if target is not None else video.with_suffix(_BROWSER_SUFFIX)
+    if out.resolve() == video.resolve():
+        return video
+    if out.is_file() and out.stat().st_size > 0 and out.stat().st_mtime >= video.stat().st_mtime:
+        return out
+    try:
+        with VideoReader(video) as reader:
+            write_video(out, iter(reader), fps=reader.fps, fourcc="VP80")
+    except BaseException:
+        out.unlink(missing_ok=True)
+        raise
+    return out
+
+
+@dataclass(frozen=True)
+class _Video:
+    heading: str
+    relative_path: str
 
 
 def _cell(value: Any) -> str:
@@ -43,7 +95,7 @@ class Report:
 
     def __init__(self, title: str) -> None:
         self.title = title
-        self._parts: list[str] = []
+        self._parts: list[str | _Video] = []
 
     def text(self, heading: str | None, body: str) -> None:
         """A paragraph (plain text, escaped)."""
@@ -76,20 +128,51 @@ class Report:
             self._parts.append(f"<p class='note'>{html.escape(note)}</p>")
 
     def video(self, heading: str, relative_path: str | Path) -> None:
-        """A video beside the report (linked, not embedded)."""
-        src = html.escape(str(relative_path))
-        self._parts.append(f"<h2>{html.escape(heading)}</h2><video controls width='800' src='{src}'></video>"
-                           f"<p class='note'><a href='{src}'>{src}</a></p>")
+        """A video beside the report (linked, not embedded; a browser-playable copy is made by :meth:`write`)."""
+        self._parts.append(_Video(heading, Path(relative_path).as_posix()))
+
+    def _video_html(self, video: _Video, folder: Path, taken: dict[Path, Path]) -> str:
+        """The player: the WebM copy first (made now), the original second, a download link and any problem."""
+        original = folder / video.relative_path
+        sources = [video.relative_path]
+        problem = ""
+        if Path(video.relative_path).suffix.lower() != _BROWSER_SUFFIX:
+            if not original.is_file():
+                problem = "was not found when the report was written"
+            else:
+                target = original.with_suffix(_BROWSER_SUFFIX)
+                if taken.get(target, original) != original:  # clip.mp4 and clip.avi in one report
+                    target = original.with_name(f"{original.stem}_{original.suffix[1:]}{_BROWSER_SUFFIX}")
+                taken[target] = original
+                try:
+                    browser_video(original, target)
+                    sources.insert(0, Path(video.relative_path).with_name(target.name).as_posix())
+                except FusiontrackError as err:
+                    logger.warning("%s: no browser-playable copy (%s)", original, err)
+                    problem = (f"is in a format browsers may not play, and no WebM copy could be made ({err}); "
+                               "open it in a video player such as VLC")
+        tags = ""
+        for source in sources:
+            kind = _MIME.get(Path(source).suffix.lower())
+            tags += f"<source src='{html.escape(source)}'" + (f" type='{kind}'>" if kind else ">")
+        src = html.escape(video.relative_path)
+        link = f"<a href='{src}' download>{src}</a>"
+        note = f"{link} {html.escape(problem)}" if problem else f"download: {link}"
+        return (f"<h2>{html.escape(video.heading)}</h2><video controls width='800'>{tags}</video>"
+                f"<p class='{'warning' if problem else 'note'}'>{note}</p>")
 
     def write(self, path: str | Path) -> Path:
+        """Render the report into ``path`` (its folder is created), making the videos' WebM copies beside them."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
+        taken: dict[Path, Path] = {}
+        parts = [p if isinstance(p, str) else self._video_html(p, path.parent, taken) for p in self._parts]
         style = ("body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}"
                  "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #bbb;padding:3px 8px;"
                  "text-align:right}th{background:#eee}td:first-child{text-align:left}.note{color:#666;"
-                 "font-size:90%}img{max-width:100%}")
+                 "font-size:90%}.warning{color:#a40;font-size:90%}img{max-width:100%}")
         doc = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(self.title)}</title>"
-               f"<style>{style}</style></head><body><h1>{html.escape(self.title)}</h1>{''.join(self._parts)}"
+               f"<style>{style}</style></head><body><h1>{html.escape(self.title)}</h1>{''.join(parts)}"
                "</body></html>")
         path.write_text(doc, encoding="utf-8")
         return path
