@@ -282,7 +282,8 @@ def repair(
 @app.command()
 def view(
     recordings: Annotated[list[Path], typer.Argument(help="Recording(s), simulated or real.")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="Video file to write (.mp4 or .avi).")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Video file to write (.mp4, .avi, .mkv or .webm: "
+                                                   ".webm plays in browsers).")],
     max_frames: Annotated[int | None, typer.Option(help="Stop after this many frames.")] = None,
     fps: Annotated[float | None, typer.Option(help="Frame rate of the video (default: the recording's).")] = None,
 ) -> None:
@@ -1138,7 +1139,7 @@ def fit_step_model(
     model = step_model_from_files(walks, length, subject=subject)
     model.save(output)
     console.print(f"step length = {model.intercept_m:.3f} m + {model.slope_mps:.3f} m/s x duration "
-                  f"(from {model.n_train} steps, rms {model.rms_m:.3f} m) -> {output}")
+                  f"(from {model.n_train} steps, {model.rms_text}) -> {output}")
 
 
 # --------------------------------------------------------------------------------------------------

@@ -275,10 +275,7 @@ class FusionParams:
         ConfigError
             An unknown key or a bad value, naming ``source`` and the key.
         """
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(values) - names)
-        if unknown:
-            raise ConfigError(f"{source}: unknown parameter(s) {unknown}; expected some of {sorted(names)}")
+        _check_keys(values, {f.name for f in dataclasses.fields(cls)}, source)
         vals = dict(values)
         flags = [f.name for f in dataclasses.fields(cls) if isinstance(f.default, bool)]
         bad = sorted(k for k in flags if k in vals and not isinstance(vals[k], bool))
@@ -288,16 +285,37 @@ class FusionParams:
             app = vals["appearance"]
             if not isinstance(app, Mapping):
                 raise ConfigError(f"{source}.appearance: expected a table, got {app!r}")
-            try:
-                vals["appearance"] = AppearanceParams.from_dict(app)
-            except (TypeError, ValueError) as err:
-                raise ConfigError(f"{source}.appearance: {err}") from err
+            vals["appearance"] = _appearance_from_mapping(app, f"{source}.appearance")
         try:
             return cls(**vals)
         except ConfigError as err:
             raise ConfigError(f"{source}: {err}") from err
         except (TypeError, ValueError) as err:  # a value of the wrong type met by a check that assumed numbers
             raise ConfigError(f"{source}: {err}") from err
+
+
+def _check_keys(values: Mapping[str, Any], known: set[str], source: str) -> None:
+    """A ConfigError naming ``source``, the unknown keys of a table and the known ones, if it has any."""
+    unknown = sorted(str(k) for k in set(values) - known)
+    if unknown:
+        raise ConfigError(f"{source}: unknown key(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
+
+
+def _appearance_from_mapping(values: Mapping[str, Any], source: str) -> AppearanceParams:
+    """AppearanceParams from a ``[fusion.appearance]`` table, its keys and those of its sub-tables ``patches``,
+    ``features`` and ``boost`` checked by name first (``source``: e.g. ``"site.toml: fusion.appearance"``)."""
+    default = AppearanceParams()
+    _check_keys(values, {f.name for f in dataclasses.fields(default)}, source)
+    for name in ("patches", "features", "boost"):
+        if name in values:
+            sub = values[name]
+            if not isinstance(sub, Mapping):
+                raise ConfigError(f"{source}.{name}: expected a table, got {sub!r}")
+            _check_keys(sub, {f.name for f in dataclasses.fields(getattr(default, name))}, f"{source}.{name}")
+    try:
+        return AppearanceParams.from_dict(values)
+    except (TypeError, ValueError) as err:  # a bad value: the check names the field
+        raise ConfigError(f"{source}: {err}") from err
 
 
 @dataclass(frozen=True, slots=True)
@@ -1442,7 +1460,9 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         info = rec.topic_types()
         lasers = [t for t, i in info.items() if i == LASERSCAN] if topics is None else list(topics)
         if not lasers:
-            raise RecordingError(f"{path}: no sensor_msgs/LaserScan topic to track")
+            raise RecordingError(f"{', '.join(str(q) for q in rec.paths)}: no sensor_msgs/LaserScan topic to track "
+                                 "(the people pipeline fuses lasers with a camera; --pipeline people-camera tracks "
+                                 "with the camera alone)")
         image_topic = _image_topic(rec, camera_topic)
         cam_sensor = "" if image_topic is None else rec.sensor_of(image_topic)
         if image_topic is None:

@@ -286,7 +286,8 @@ def _params_from(options: Mapping[str, Any]) -> WearableParams:
         elif key in sub["vision"]:
             nested["vision"][key] = value
         else:
-            raise ConfigError(f"run_wearable: unknown option {key!r}; options: "
+            raise ConfigError(f"wearable: unknown option {key!r} (a key of the pipeline file's [wearable] table "
+                              f"or a keyword of run_wearable); known: "
                               f"{', '.join(sorted(own | sub['assoc'] | sub['vision']))}")
     try:
         if nested["assoc"]:
@@ -295,7 +296,7 @@ def _params_from(options: Mapping[str, Any]) -> WearableParams:
             top["vision"] = dataclasses.replace(top.get("vision", VisualParams()), **nested["vision"])
         return WearableParams(**top)
     except (TypeError, ValueError) as err:
-        raise ConfigError(f"run_wearable: {err}") from err
+        raise ConfigError(f"wearable: {err}") from err
 
 
 def run_wearable(recording_path: str | Path, out_dir: str | Path, **options: Any) -> dict[str, Any]:

@@ -372,14 +372,14 @@ def calibrate_imu(t_ns: Any, accel_mps2: Any, gyro_radps: Any = None, *,
     if sl is None:
         # no still period: the mean over whole strides is still gravity (the step pattern has zero mean)
         log.warning("no still period at the start of the IMU stream: gravity from the whole stream, gyro bias "
-                    "not estimated (ALGORITHMS.md C1 wants >= %.0f s standing still)", min_still_s)
+                    "not estimated (it needs the phone kept still for >= %.0f s at the start)", min_still_s)
         gravity = accel.mean(axis=0)
         return ImuCalibration(gravity, gravity_to_level(gravity), np.zeros(3), nan3, nan3, None)
     i0, i1 = sl
     seconds = (int(t[i1 - 1]) - int(t[i0])) * 1e-9
     if seconds < min_still_s:
-        log.warning("still period of %.1f s (ALGORITHMS.md C1 wants >= %.0f s): bias and noise are rough",
-                    seconds, min_still_s)
+        log.warning("still period of only %.1f s (a reliable estimate needs the phone kept still for >= %.0f s): "
+                    "gravity, gyro bias and noise are rough", seconds, min_still_s)
     gravity = accel[i0:i1].mean(axis=0)
     accel_noise = accel[i0:i1].std(axis=0)
     if gyro is None:

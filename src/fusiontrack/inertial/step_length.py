@@ -81,6 +81,16 @@ class StepLengthModel:
         if not isinstance(self.n_train, int) or self.n_train < 0:
             raise ValueError(f"n_train: expected an integer >= 0, got {self.n_train!r}")
 
+    @property
+    def rms_text(self) -> str:
+        """``rms_m`` for people: ``"rms 0.041 m"``, or why there is none (``rms_m`` is ``NaN``)."""
+        if np.isfinite(self.rms_m):
+            return f"rms {self.rms_m:.3f} m"
+        if self.n_train == 0:
+            return "rms unknown: not fitted to anybody's steps"
+        return ("rms unknown: fitted from each walk's total length, so the error of single steps is not "
+                "measured (per-step lengths give it)")
+
     def length(self, duration_s: Any) -> np.ndarray:
         """Step lengths, m, for step durations ``duration_s`` (any shape, s); clipped."""
         d = np.asarray(duration_s, dtype=np.float64)

@@ -285,6 +285,10 @@ def detect_imu_csv_format(path: str | Path) -> str:
             first = next((line for line in f if line.strip() and not line.lstrip().startswith("#")), "")
     except (OSError, UnicodeDecodeError) as err:
         raise RecordingError(f"{path}: cannot be read (expected an IMU CSV file)") from err
+    if not first:
+        what = "empty file (0 bytes)" if path.stat().st_size == 0 else "no data: only blank or comment lines"
+        raise RecordingError(f"{path}: {what}; expected an IMU CSV file: 7 columns ({_VALIDATION_COLS}), "
+                             f"5 ({_ACCEL_COLS}) or {_GENERIC_DOC}")
     fields = [x.strip() for x in first.split(",")]
     if any(c.isalpha() and x.lower() not in ("nan", "inf", "-inf") for x in fields for c in x[:1]):
         return "generic"

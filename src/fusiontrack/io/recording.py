@@ -12,9 +12,11 @@ on one clock and in order with :mod:`fusiontrack.io.sync`.
 
 from __future__ import annotations
 
+import ast
 import heapq
 import json
 import logging
+import re
 from collections import Counter
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -73,8 +75,24 @@ class TopicInfo:
         return (self.count - 1) / (span / 1e9) if self.count > 1 and span > 0 else 0.0
 
 
+_TUPLE_OF_TEXTS = re.compile(r"""\((?:'[^'\\]*'|"[^"\\]*")(?:,\s*(?:'[^'\\]*'|"[^"\\]*"))*,?\)""")
+
+
+def _plain_text(text: str) -> str:
+    """A reader's message with the Python repr of an args tuple in it as plain text: rosbags words a damaged
+    index as ``Bag index looks damaged: ('Header could not be read from file.',)``."""
+    def plain(match: re.Match[str]) -> str:
+        try:
+            parts = ast.literal_eval(match.group(0))
+        except (ValueError, SyntaxError):
+            return match.group(0)
+        return "; ".join(str(p) for p in (parts if isinstance(parts, tuple) else (parts,)))
+
+    return _TUPLE_OF_TEXTS.sub(plain, text)
+
+
 def _describe_open_error(path: Path, err: BaseException) -> str:
-    text = " ".join(str(a) for a in err.args) or type(err).__name__
+    text = _plain_text(" ".join(str(a) for a in err.args)) or type(err).__name__
     hint = _repair_hint(path)
     if path.is_file() and path.suffix not in (".bag", ".mcap", ".db3") and not hint:
         return (f"{path}: not a recording fusiontrack can open (expected a ROS 1 .bag, a ROS 2 bag folder, "

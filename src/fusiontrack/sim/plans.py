@@ -244,10 +244,13 @@ def crowd_plans(world: StaticWorld, mean_present: float = 10.0, duration_s: floa
     2.5-3.5 pairs however wide the routes spread; 20 x 15 m gives ~2). ``lookalike_pairs`` pairs of
     people whose visits overlap most dress nearly identically and are of nearly the same height.
     """
-    if mean_present <= 0 or duration_s <= 0 or interacting_pairs < 0:
-        raise ConfigError(f"mean_present, duration_s: expected > 0, got {mean_present}, {duration_s}")
-    if not (0 <= stop_probability <= 1 and 0 <= group_fraction <= 1):
-        raise ConfigError("stop_probability, group_fraction: expected values in [0, 1]")
+    for name, value, ok, expected in (("mean_present", mean_present, mean_present > 0, "> 0"),
+                                      ("duration_s", duration_s, duration_s > 0, "> 0"),
+                                      ("interacting_pairs", interacting_pairs, interacting_pairs >= 0, ">= 0"),
+                                      ("stop_probability", stop_probability, 0 <= stop_probability <= 1, "in [0, 1]"),
+                                      ("group_fraction", group_fraction, 0 <= group_fraction <= 1, "in [0, 1]")):
+        if not ok:  # (each named alone: the message must not blame a valid one)
+            raise ConfigError(f"{name}: expected {expected}, got {value}")
     rng = _rng(rng)
     free = _clearance_map(world)
     spread, rate, best, ratios = 0.3, None, None, []
@@ -437,8 +440,10 @@ def road_plans(world: StaticWorld, duration_s: float = 120.0, rng: np.random.Gen
     unknown = set(incidents) - {"stop", "leave", "slow"}
     if unknown:
         raise ConfigError(f"incidents: unknown {sorted(unknown)}; expected 'stop', 'leave', 'slow'")
-    if not 0 <= bicycle_fraction <= 1 or rate_veh_per_min < 0:
-        raise ConfigError("bicycle_fraction: expected [0, 1]; rate_veh_per_min: expected >= 0")
+    if not 0 <= bicycle_fraction <= 1:
+        raise ConfigError(f"bicycle_fraction: expected a value in [0, 1], got {bicycle_fraction}")
+    if not rate_veh_per_min >= 0:
+        raise ConfigError(f"rate_veh_per_min: expected >= 0, got {rate_veh_per_min}")
     if not 0 <= road < world.roads.shape[0]:
         raise ConfigError(f"road: expected an index of the world's {world.roads.shape[0]} road(s), got {road}"
                           + ("; this world has no road (use world.setting = 'road')" if not world.roads.size else ""))
@@ -514,8 +519,9 @@ def wearable_plans(world: StaticWorld, duration_s: float = 20.0, rng: np.random.
     if not sizes[0] <= n <= sizes[1] or len(set(phones)) != n or not all(phones):
         raise ConfigError(f"phones: layout {layout!r} needs {sizes[0]}-{sizes[1]} distinct non-empty phone names, "
                           f"got {list(phones)}")
-    if still_s < 0 or stagger_s < 0:
-        raise ConfigError(f"still_s, stagger_s: expected values >= 0, got {still_s}, {stagger_s}")
+    for name, value in (("still_s", still_s), ("stagger_s", stagger_s)):
+        if not value >= 0:
+            raise ConfigError(f"{name}: expected a value >= 0, got {value}")
     rng = _rng(rng)
     x0, y0, x1, y1 = world.bounds_m
     mid = np.array([x0 + x1, y0 + y1]) / 2

@@ -241,8 +241,10 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     Raises
     ------
     ConfigError
-        Unknown name (the built-in names are listed), unreadable file, bad TOML or a bad value (the
-        field is named).
+        Unknown name (the built-in names are listed), unreadable file, bad TOML, a bad value (the
+        field is named), or no sensor at all (no ``[[lasers]]``, ``[[cameras]]`` or ``[[phones]]``: its
+        recording would hold nothing but ground truth). A ground-truth-only scenario can still be made on
+        purpose from a loaded one, e.g. ``with_overrides(settings={"lasers": [], "cameras": []})``.
     """
     text = str(name_or_path)
     path = Path(text)
@@ -262,7 +264,13 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         data = tomllib.loads(content)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{source}: not valid TOML: {err}") from err
-    return parse_scenario(data, source, name=path.stem if source == str(path) else text)
+    scenario = parse_scenario(data, source, name=path.stem if source == str(path) else text)
+    cfg = scenario.config
+    if not (cfg.lasers or cfg.cameras or cfg.phones):
+        raise ConfigError(f"{source}: no sensors: the scenario has no [[lasers]], [[cameras]] or [[phones]] "
+                          "table, so its recording would hold only ground truth; add at least one (the built-in "
+                          "scenarios, listed by `fusiontrack scenarios`, show how)")
+    return scenario
 
 
 def call_with_params(fn: Callable[..., Any], params: Mapping[str, Any], section: str, source: str,
