@@ -10,7 +10,7 @@ import json
 import logging
 import os
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated, Any
@@ -188,6 +188,11 @@ def _load_config(path: Path | None) -> Any:
     from .config import PipelineConfig, load_config
 
     return load_config(path) if path is not None else PipelineConfig()
+
+
+def _counts(counts: Mapping[str, int] | None) -> str:
+    """``{"appear": 18, "born": 3}`` as ``appear 18, born 3`` (``none`` when empty), for the summary lines."""
+    return ", ".join(f"{k} {v}" for k, v in counts.items()) if counts else "none"
 
 
 def _check_time(time_source: str) -> None:
@@ -546,7 +551,7 @@ def track(
     import numpy as np
 
     per_scan = (np.array(timings["detect_s"]) + np.array(timings["track_s"])) * 1e3 if timings["track_s"] else []
-    console.print(f"{n_tracks} tracks, {len(states)} states, events {kinds or 'none'}"
+    console.print(f"{n_tracks} tracks, {len(states)} states, events: {_counts(kinds)}"
                   + (f"; per scan median {np.median(per_scan):.2f} ms, p95 {np.percentile(per_scan, 95):.2f} ms"
                      if len(per_scan) else "") + f" -> {output}")
     if video:
@@ -592,7 +597,7 @@ def _track_wearable(sources: list[Path], output: Path, *, config: Path | None, s
         table.add_row(phone, p["status"], str(p["steps"]), f"{p['distance_m']:.1f}", str(p["fixes"]),
                       "–" if p["corrected_from_s"] is None else f"{p['corrected_from_s']:.1f}", str(fails), str(recs))
     console.print(table)
-    console.print(f"events {summary['events'] or 'none'} -> {output}")
+    console.print(f"events: {_counts(summary['events'])} -> {output}")
 
 
 def _track_traffic(sources: list[Path], output: Path, *, config: Path | None, geometry: Path | None,
@@ -626,7 +631,7 @@ def _track_traffic(sources: list[Path], output: Path, *, config: Path | None, ge
                               video=video, time_source=time_source, progress=lambda f: bar.update(task, completed=f),
                               calibration=calibration, scene_engine=scene)
     console.print(f"{summary['tracks']} tracks over {summary['duration_s']:.1f} s at {summary['x_real_time']:.1f}x "
-                  f"real time ({summary['workers']} camera worker(s)); events {summary['events'] or 'none'} -> "
+                  f"real time ({summary['workers']} camera worker(s)); events: {_counts(summary['events'])} -> "
                   f"{output}")
     if "metrics" in summary:
         table = Table(title="vehicles against ground truth (match within 2 m)")
@@ -685,7 +690,7 @@ def events(
     kinds: dict[str, int] = {}
     for e in found:
         kinds[e.kind] = kinds.get(e.kind, 0) + 1
-    console.print(f"{len(found)} events from {len({s.track_id for s in states})} tracks: {kinds or 'none'}")
+    console.print(f"{len(found)} events from {len({s.track_id for s in states})} tracks: {_counts(kinds)}")
     if output is not None:
         write_jsonl(output, found)
         console.print(f"events: {output}")
@@ -729,7 +734,7 @@ def _track_camera(sources: list[Path], output: Path, *, detections: Path | None,
     source = f"detections {detections.name}" if detections is not None else "foreground blobs"
     floor = "floor positions from the calibrated camera" if stats.calibrated else "no camera calibration: x, y NaN"
     console.print(f"{stats.n_tracks} tracks, {len(states)} states over {stats.n_frames} frames of {stats.width}x"
-                  f"{stats.height} from {source}, events {kinds or 'none'}; {stats.fps:.1f} fps "
+                  f"{stats.height} from {source}, events: {_counts(kinds)}; {stats.fps:.1f} fps "
                   f"(decode + detection + tracking); {floor} -> {output}")
     if overlay is not None:
         console.print(f"overlay: {overlay} ({stats.n_frames} frames)")
