@@ -240,4 +240,17 @@ def test_a_recording_without_lasers_points_to_the_camera_pipeline(shared_data):
         track_recording(bag)
     message = str(err.value)
     assert message.startswith(f"{bag}:")
-    assert "/hero/head_rgbd_sensor/rgb/image_raw" in message and "--pipeline people-camera" in message
+    assert "/hero/head_rgbd_sensor/rgb/image_raw" in message
+    assert "--pipeline people-camera" in message
+
+
+def test_a_failed_camera_run_leaves_no_empty_folder(tmp_path):
+    """track --pipeline people-camera on a video OpenCV cannot open: one error line, and the output folder it would
+    have written into is not left behind empty."""
+    video = tmp_path / "empty.avi"
+    video.write_bytes(b"")
+    result = _cli("track", str(video), "--pipeline", "people-camera", "-o", str(tmp_path / "out"))
+    assert result.returncode == 2
+    assert "empty.avi" in result.stderr
+    assert "Traceback" not in result.stderr
+    assert not (tmp_path / "out").exists()

@@ -716,15 +716,21 @@ def _track_camera(sources: list[Path], output: Path, *, detections: Path | None,
     if detections is not None and not detections.is_file():
         raise RecordingError(f"--detections {detections}: no such file (expected MOTChallenge rows "
                              "frame,-1,left,top,width,height,conf,...)")
+    created = not output.exists()
     output.mkdir(parents=True, exist_ok=True)
     overlay = output / "overlay.mp4" if video else None
-    with progress() as bar:
-        task = bar.add_task("tracking (camera)", total=1.0)
-        states, events, stats = track_camera(
-            sources, detections=detections, detection_scale=detection_scale,
-            min_score=-float("inf") if min_score is None else min_score, camera_topic=camera_topic,
-            overlay=overlay, max_frames=max_frames, time_source=time_source,
-            progress=lambda f: bar.update(task, completed=f))
+    try:
+        with progress() as bar:
+            task = bar.add_task("tracking (camera)", total=1.0)
+            states, events, stats = track_camera(
+                sources, detections=detections, detection_scale=detection_scale,
+                min_score=-float("inf") if min_score is None else min_score, camera_topic=camera_topic,
+                overlay=overlay, max_frames=max_frames, time_source=time_source,
+                progress=lambda f: bar.update(task, completed=f))
+    except BaseException:
+        if created and not any(output.iterdir()):  # a wrong topic or an empty video: no empty folder left behind
+            output.rmdir()
+        raise
     write_tracks_csv(output / "tracks.csv", states)
     write_jsonl(output / "tracks.jsonl", [*states, *events])
     write_mot(output / "tracks_mot.txt", states, frame_of=stats.frame_of())
