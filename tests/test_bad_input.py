@@ -6,6 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -254,3 +255,16 @@ def test_a_failed_camera_run_leaves_no_empty_folder(tmp_path):
     assert "empty.avi" in result.stderr
     assert "Traceback" not in result.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_view_makes_its_output_folder_but_not_for_a_bad_suffix(shared_data, tmp_path):
+    """view -o new/folder/v.mp4 makes the folders, as track does; -o new/v.gif says what is wrong with the suffix and
+    makes no folder for it."""
+    demo = str(shared_data / DEMO)
+    ok = _cli("view", demo, "-o", str(tmp_path / "new/sub/v.mp4"), "--max-frames", "3")
+    assert ok.returncode == 0, ok.stderr
+    assert cv2.VideoCapture(str(tmp_path / "new/sub/v.mp4")).get(cv2.CAP_PROP_FRAME_COUNT) == 3
+    bad = _cli("view", demo, "-o", str(tmp_path / "other/v.gif"))
+    assert bad.returncode == 2
+    assert "v.gif: suffix '.gif' is not a video format" in bad.stderr
+    assert not (tmp_path / "other").exists()

@@ -596,3 +596,16 @@ def test_tracks_on_another_clock_are_named(caplog: pytest.LogCaptureFixture) -> 
         m = evaluate_floor(gt, late, 0.5)
     assert caplog.text == ""
     assert (m.fn, m.fp) == (20, 0)
+    # truth that covers only the first 100 s of a 300 s run: both ends are after the truth's, by 3 s and 200 s; that
+    # is no single shift of a clock
+    with caplog.at_level("WARNING", logger="fusiontrack.eval.mot"):
+        evaluate_floor(gt[:1000], late, 0.5)
+    assert "the tracks start" not in caplog.text
+    assert "cover only part" in caplog.text  # most states have no truth frame near them: why, in the warning
+    caplog.clear()
+    # a late start and a late end by one shift (60 s, 2 % of the span or more) is a clock problem again
+    later = [TrackState(t_ns=int(t + 60 * 10**9), sensor="laser", track_id=7, position_m=walk(t), cls="person")
+             for t in t_gt]
+    with caplog.at_level("WARNING", logger="fusiontrack.eval.mot"):
+        evaluate_floor(gt, later, 0.5)
+    assert "the tracks start +60.0 s and end +60.0 s" in caplog.text

@@ -137,3 +137,14 @@ def test_failed_copy_gets_a_visible_note_and_leaves_no_file(tmp_path: Path, monk
     assert "browsers may not play" in html
     assert "cannot write a video with codec &#x27;VP80&#x27;" in html
     assert not (tmp_path / "clip.webm").exists()
+
+
+def test_browser_copies_can_be_turned_off(tmp_path: Path) -> None:
+    """Report(browser_copies=False): the video is linked as it is, no WebM is made (VP8 costs ~10x the mp4v)."""
+    write_video(tmp_path / "clip.mp4", [np.full((48, 64, 3), 128, np.uint8)] * 3, fps=10)
+    rep = Report("t", browser_copies=False)
+    rep.video("Clip", "clip.mp4")
+    html = rep.write(tmp_path / "report.html").read_text()
+    assert _SOURCE.findall(html) == [("clip.mp4", "video/mp4")]
+    assert "class='warning'" not in html
+    assert not (tmp_path / "clip.webm").exists()

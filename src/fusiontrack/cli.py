@@ -297,8 +297,13 @@ def view(
     One frame per camera image (or per laser scan when there is no camera); sensor poses come from
     the recording's tf_static, so a simulated recording is drawn in the world frame.
     """
+    from .io.video import VIDEO_WRITE_SUFFIXES, check_video_output
     from .viz.preview import render_preview
 
+    if not output.parent.exists():
+        if output.suffix.lower() not in VIDEO_WRITE_SUFFIXES:
+            check_video_output(output)  # a bad suffix is said first, before a folder is made for it
+        output.parent.mkdir(parents=True)  # as track and pdr make theirs
     with progress() as bar:
         task = bar.add_task("rendering", total=None)
         result = render_preview(recordings, output, max_frames=max_frames, fps=fps,

@@ -504,8 +504,8 @@ def _floor_sequence(gt: Sequence[GroundTruth], tracks: Iterable[TrackState | Tra
         log_at = logging.WARNING if 2 * n_dropped > inside.size else logging.DEBUG
         logger.log(log_at, "%s: %d of %d track states are farther than %.0f ms from every ground-truth frame and are "
                    "not scored%s", name, n_dropped, inside.size, time_tolerance_ns / 1e6,
-                   ": are the tracks and the ground truth on one clock (header stamps or log times: fusiontrack "
-                   "eval --time)?" if log_at == logging.WARNING else "")
+                   " (does the ground truth cover only part of them, or are the two on different clocks: header "
+                   "stamps and log times, fusiontrack eval --time?)" if log_at == logging.WARNING else "")
 
     bounds = np.searchsorted(frame, np.arange(n_t + 1))
     tr_ids = [st_id[bounds[k]:bounds[k + 1]] for k in range(n_t)]
@@ -520,7 +520,10 @@ def _warn_if_shifted(gt_t: np.ndarray, st_t: np.ndarray, name: str) -> None:
     if gt_t.size < 2 or st_t.size < 2:
         return
     d0, d1 = float(st_t.min() - gt_t[0]), float(st_t.max() - gt_t[-1])
-    if d0 * d1 > 0 and min(abs(d0), abs(d1)) > max(1e9, 0.02 * float(gt_t[-1] - gt_t[0])):
+    big = max(1e9, 0.02 * float(gt_t[-1] - gt_t[0]))
+    # one shift at both ends (truth that covers only part of the tracks moves one end, or the two by different
+    # amounts: no clock problem)
+    if d0 * d1 > 0 and min(abs(d0), abs(d1)) > big and abs(d0 - d1) <= 0.25 * max(abs(d0), abs(d1)):
         logger.warning("%s: the tracks start %+.1f s and end %+.1f s from the ground truth's start and end: are they "
                        "on one clock (header stamps or log times: fusiontrack eval --time)?", name, d0 / 1e9, d1 / 1e9)
 

@@ -88,8 +88,7 @@ class StepLengthModel:
             return f"rms {self.rms_m:.3f} m"
         if self.n_train == 0:
             return "rms unknown: not fitted to anybody's steps"
-        return ("rms unknown: fitted from each walk's total length, so the error of single steps is not "
-                "measured (per-step lengths give it)")
+        return "rms unknown: fitted from each walk's total length, so the error of single steps is not measured"
 
     def length(self, duration_s: Any) -> np.ndarray:
         """Step lengths, m, for step durations ``duration_s`` (any shape, s); clipped."""

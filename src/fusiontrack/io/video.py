@@ -19,7 +19,10 @@ must increase strictly, and there must be exactly one per frame.
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
+import sys
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from types import TracebackType
@@ -277,6 +280,27 @@ VIDEO_WRITE_SUFFIXES = tuple(_FOURCC_BY_SUFFIX)
 """The file suffixes :func:`write_video` picks a codec for."""
 
 
+@contextlib.contextmanager
+def _native_stderr_off() -> Iterator[None]:
+    """Silence the process's stderr (file descriptor 2) for a moment: OpenCV's FFmpeg writes a harmless notice
+    there when it opens VP8 in WebM (``tag 0x30385056/'VP80' is not supported with codec id 139``), and the file
+    it writes is fine."""
+    sys.stderr.flush()
+    try:
+        saved = os.dup(2)
+    except OSError:  # no stderr to silence
+        yield
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+
+
 def check_video_output(path: str | Path, fourcc: str | None = None) -> str:
     """Check that :func:`write_video` can create ``path``, before any frame is made; returns the fourcc.
 
@@ -357,7 +381,8 @@ def write_video(
                 pixels = cv2.cvtColor(pixels, cv2.COLOR_GRAY2BGR)
             if writer is None:
                 size = (int(pixels.shape[1]), int(pixels.shape[0]))
-                writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*code), float(fps), size)
+                with _native_stderr_off() if code.upper() == "VP80" else contextlib.nullcontext():
+                    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*code), float(fps), size)
                 if not writer.isOpened():
                     hint = "another fourcc" if fourcc is not None else "another suffix, e.g. .avi or .mp4"
                     raise RecordingError(f"{path}: OpenCV cannot write a video with codec {code!r} "

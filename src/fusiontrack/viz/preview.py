@@ -65,7 +65,7 @@ def render_preview(
     height_px: int = 480, progress: Callable[[int, int], None] | None = None,
     tracks: Sequence[TrackState] | None = None,
 ) -> PreviewResult:
-    """Write a preview video of ``recording`` to ``output`` (``.mp4`` or ``.avi``).
+    """Write a preview video of ``recording`` to ``output`` (``.mp4``, ``.avi``, ``.mkv`` or ``.webm``).
 
     ``tracks`` (world frame, or the laser frame for a recording without poses) are drawn as filled
     squares with their id and a short trail, on top of the ground truth's open circles.
