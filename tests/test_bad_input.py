@@ -160,6 +160,12 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         # eval's own options
         (["eval", "{tracks}", "{demo}", "--time", "lgo"], "--time: expected 'header' or 'log', got 'lgo'"),
         (["eval", "{tracks}", "{demo}", "--topic", "/gt_wrong"], "/gt_wrong"),
+        (["eval", "{mot}", "{a_dir}"], "a_dir: a folder that is not a recording"),
+        # calibrate from control points: the file and the flags, not the library's function
+        (["calibrate", "camera_0", "-c", "{hall}", "--points", "{two_points}", "--intrinsics", "500,500,320,240",
+          "--dry-run"], "two_points.csv: 2 control points given, at least 4 are needed"),
+        (["calibrate", "camera_0", "-c", "{hall}", "--points", "{two_points}", "--dry-run"],
+         "camera_0: its intrinsics are needed: give --intrinsics"),
     ],
 )
 def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args, expected):
@@ -176,10 +182,16 @@ def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args
         (tmp_path / f"{name}.toml").write_text(text)
     (tmp_path / "a_file").write_text("")
     (tmp_path / "a_dir").mkdir()
+    (tmp_path / "hall.toml").write_text('[sensors.camera_0]\nkind = "camera"\ntopic = "/camera_0/image"\n'
+                                        'pose = { x = 0.0, y = 0.0, z = 3.0, yaw_deg = 0.0 }\n')
+    (tmp_path / "two_points.csv").write_text("x_m,y_m,z_m,u_px,v_px\n0,0,0,100,400\n1,0,0,200,400\n")
+    (tmp_path / "det.txt").write_text("1,1,10,10,20,40,1,-1,-1,-1\n")
     tracks = tmp_path / "tracks.csv"
     write_tracks_csv(tracks, [TrackState(10**18, "laser", 1, np.zeros(2), np.zeros(2))])
     subst = {"demo": str(shared_data / DEMO), "out": str(tmp_path / "o"), "cfg": str(cfg), "junk": str(junk),
              "a_file": str(tmp_path / "a_file"), "a_dir": str(tmp_path / "a_dir"), "tracks": str(tracks),
+             "hall": str(tmp_path / "hall.toml"), "two_points": str(tmp_path / "two_points.csv"),
+             "mot": str(tmp_path / "det.txt"),
              **{name: str(tmp_path / f"{name}.toml") for name in tables}}
     result = _cli(*[a.format(**subst) for a in args])
     assert result.returncode == 2

@@ -918,6 +918,9 @@ def _eval_image_boxes(tracks: Path, recording: Path, camera: str | None, time_so
 
     folder = tracks if tracks.is_dir() else tracks.parent
     mot_vs_recording = tracks.suffix == ".txt" and recording.suffix != ".txt"
+    if mot_vs_recording and recording.is_dir() and not (recording / "metadata.yaml").is_file():
+        raise ConfigError(f"{recording}: a folder that is not a recording (no metadata.yaml); MOTChallenge rows are "
+                          "scored against a MOTChallenge gt file (.txt) or a simulated recording's camera boxes")
     if camera is None and not mot_vs_recording and (recording.suffix == ".txt"
                                                     or not (folder / "tracks_mot.txt").is_file()):
         return None  # a MOTChallenge gt file, or not a people-camera output
@@ -1019,8 +1022,18 @@ def calibrate(
                 raise ConfigError(f"--intrinsics: expected 4, 8 or 9 numbers, got {len(vals)}")
             fx, fy, cx, cy = vals[:4]
             intr = (np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), np.array(vals[4:]) if len(vals) > 4 else None)
-        report = calibrate_from_points(config, camera, points, reference=reference, intrinsics=intr,
-                                       recording=recording, ransac=ransac, write=not dry_run)
+        from .errors import CalibrationError
+
+        try:
+            report = calibrate_from_points(config, camera, points, reference=reference, intrinsics=intr,
+                                           recording=recording, ransac=ransac, write=not dry_run)
+        except CalibrationError as err:  # the library's function name means nothing to a user: name the file
+            raise CalibrationError(f"--points {points}: {str(err).removeprefix('solve_pnp: ')}") from None
+        except ConfigError as err:
+            if str(err).startswith("intrinsics: "):
+                raise ConfigError(f"{camera}: its intrinsics are needed: give --intrinsics fx,fy,cx,cy[,k1,k2,p1,p2"
+                                  "[,k3]] or --recording with its CameraInfo") from None
+            raise
         fit = report.pnp
         console.print(f"PnP on {len(fit.residuals_px)} points: reprojection "
                       f"rms {fit.rms_px:.2f} px, median {fit.median_px:.2f} px, max {fit.max_px:.2f} px")
