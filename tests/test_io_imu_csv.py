@@ -13,7 +13,8 @@ from fusiontrack.io.csvtable import read_numeric_table
 from fusiontrack.io.imu_csv import detect_imu_csv_format, read_imu_csv
 from fusiontrack.types import ImuSample
 
-OXFORD = Path("/work/shared/data/imu/oxford_step_counter")
+SHARED_DATA = (Path(__file__).resolve().parents[1] / ".." / "shared" / "data").resolve()  # as conftest.py
+OXFORD = SHARED_DATA / "imu/oxford_step_counter"
 VALIDATION = OXFORD / "validation"
 OPTIMISATION = OXFORD / "optimisation"
 needs_oxford = pytest.mark.skipif(not OXFORD.is_dir(), reason="Oxford step counter data not available")

@@ -23,8 +23,9 @@ from fusiontrack.io.tracks import (
 )
 from fusiontrack.types import Event, GroundTruth, Track, TrackState, records_equal
 
-PETS_DET = Path("/work/shared/data/video/pets09_s2l1/PETS09-S2L1_det_MOT15.txt")
-TUD = Path("/work/shared/data/mot_reference/motmetrics_tud")
+SHARED_DATA = (Path(__file__).resolve().parents[1] / ".." / "shared" / "data").resolve()  # as conftest.py
+PETS_DET = SHARED_DATA / "video/pets09_s2l1/PETS09-S2L1_det_MOT15.txt"
+TUD = SHARED_DATA / "mot_reference/motmetrics_tud"
 T0 = 1_700_000_000_000_000_001  # a Unix-epoch stamp with an odd last nanosecond
 
 

@@ -19,7 +19,8 @@ from fusiontrack.io.video import (
 )
 from fusiontrack.types import Image
 
-PETS = Path("/work/shared/data/video/pets09_s2l1/vtest_pets09_s2l1_480x360.avi")
+SHARED_DATA = (Path(__file__).resolve().parents[1] / ".." / "shared" / "data").resolve()  # as conftest.py
+PETS = SHARED_DATA / "video/pets09_s2l1/vtest_pets09_s2l1_480x360.avi"
 needs_pets = pytest.mark.skipif(not PETS.is_file(), reason="PETS 2009 sample video not available")
 
 
