@@ -25,7 +25,7 @@ import logging
 import math
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -51,6 +51,16 @@ VARIANTS = {
     "fusion": "D5 fused objects, constant-velocity Kalman",
     "fusion_pf": "D5 fused objects, D6 mode particle filter (the pipeline's output)",
 }
+
+
+def _every_nth_scan(messages: Iterable[Any], every: int) -> Iterator[LaserScan]:
+    """Each laser's 1st, (every+1)-th, ... scan: those the laser branch is given (``TrafficParams.laser_every``)."""
+    seen: dict[str, int] = {}
+    for msg in messages:
+        if isinstance(msg, LaserScan):
+            seen[msg.sensor] = seen.get(msg.sensor, -1) + 1
+            if seen[msg.sensor] % every == 0:
+                yield msg
 
 
 @dataclass(frozen=True, slots=True)
@@ -87,6 +97,12 @@ class TrafficParams:
     camera branch is two thirds of the work, and the tracks are those of the serial run, bit for bit. Default
     (``None``): one per camera within the cores this process may use, minus one for the main process (one worker
     for both cameras on 2 cores); 0 runs everything in this process.
+
+    ``prime_lasers`` (default on): the laser branch learns its backgrounds from the recording's first scans read
+    ahead (:meth:`~fusiontrack.laser.vehicles.LaserVehicleDetector.prime`, every ``laser_every``-th scan as the
+    branch gets them, as recorded: ``message_filter`` acts on the tracking pass), so vehicles on the road from the
+    start are detected from the first scan instead of after ``n_init`` scans. Off: online learning only, as a live
+    sensor would.
     """
 
     rate_hz: float = 15.0
@@ -100,6 +116,7 @@ class TrafficParams:
     camera_every: int = 2
     laser_every: int = 2
     workers: int | None = None
+    prime_lasers: bool = True
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.rate_hz) and 0.5 <= self.rate_hz <= 100):
@@ -108,6 +125,8 @@ class TrafficParams:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ConfigError(f"traffic.{name}: expected an integer >= 1, got {v!r}")
+        if not isinstance(self.prime_lasers, bool):
+            raise ConfigError(f"traffic.prime_lasers: expected true or false, got {self.prime_lasers!r}")
         w = self.workers
         if w is not None and (isinstance(w, bool) or not isinstance(w, int) or w < 0):
             raise ConfigError(f"traffic.workers: expected an integer >= 0 (0: no worker processes) or none for "
@@ -460,6 +479,9 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
                     stop("dispatch")
                 run(pending.popleft())
 
+        if laser is not None and p.prime_lasers:
+            laser.prime(_every_nth_scan(rec.messages(laser_topics, time_source=time_source, start_ns=start_ns,
+                                                     stop_ns=stop_ns), p.laser_every))
         try:
             stream = iter(rec.messages(topics, time_source=time_source, start_ns=start_ns, stop_ns=stop_ns))
             while True:

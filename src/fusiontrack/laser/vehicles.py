@@ -50,7 +50,7 @@ import functools
 import json
 import logging
 import math
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -908,6 +908,7 @@ class _Laser:
         "ids",
         "last_ns",
         "origin",
+        "primed_ns",
         "rotation",
         "t_ns",
         "translation",
@@ -921,6 +922,7 @@ class _Laser:
         self.background: BeamBackground | None = None
         self.geometry: tuple[int, float, float] | None = None
         self.t_ns: int | None = None
+        self.primed_ns: int | None = None  # scans up to this time taught the background already (prime)
         self.x = np.zeros((0, 4))
         self.P = np.zeros((0, 4, 4))
         self.ids = np.zeros(0, np.int64)
@@ -1101,20 +1103,60 @@ class LaserVehicleDetector:
                               f"{sorted(self._lasers)}; name every scanner in 'scanners'") from None
 
     # ---------------------------------------------------------------------------------------------
-    def __call__(self, scan: LaserScan) -> list[Detection]:
-        """Process one scan; the detections of its vehicles (road frame), ``[]`` while the background learns.
+    def prime(self, scans: Iterable[LaserScan], max_scans: int | None = None) -> dict[str, int]:
+        """Learn every laser's background from the start of a recording before tracking it (as
+        :meth:`fusiontrack.laser.LaserPeopleDetector.prime` does for people).
 
-        Raises
-        ------
-        ConfigError
-            ``scan.sensor`` is not one of the configured scanners.
+        Online, nothing is detected until a laser has sent ``n_init`` scans: vehicles on the road from the start go
+        unseen meanwhile. This takes ``scans`` (the stream the tracking pass will give :meth:`__call__`, from its
+        start) until every laser's background is initialised and keeps only the backgrounds: the tracking pass then
+        classifies those first scans against them *without learning from them again*, and learns from every later
+        scan as usual (from then on each background is the one online learning would have reached).
+
+        Parameters
+        ----------
+        scans : iterable of LaserScan
+        max_scans : int, optional
+            Stop after this many scans even if some laser is not initialised (default ``4 * n_init`` per laser);
+            such a laser is left to learn online from its first scan.
+
+        Returns
+        -------
+        dict sensor -> int
+            Scans each laser's priming took.
         """
-        st = self._state(scan.sensor)
+        n_init = int(self._bg_args["n_init"])
+        limit = 4 * n_init * len(self._lasers) if max_scans is None else int(max_scans)
+        used = dict.fromkeys(self._lasers, 0)
+        for i, scan in enumerate(scans):
+            if i >= limit:
+                break
+            st = self._state(scan.sensor)
+            if not self._usable(st, scan):
+                continue
+            self._background_of(st, scan)
+            st.t_ns = scan.t_ns
+            if scan.valid_ranges_m().size:
+                st.background.update(self._free_as_far(scan, st.background.range_max_m))
+            used[scan.sensor] += 1
+            if all(x.background is not None and x.background.initialised for x in self._lasers.values()):
+                break
+        for st in self._lasers.values():
+            if st.background is not None and st.background.initialised:
+                st.primed_ns = st.t_ns
+            else:
+                st.background, st.geometry, st.primed_ns = None, None, None
+            st.t_ns = None
+        self.dropped_scans = dict.fromkeys(self._lasers, 0)  # the tracking pass meets (and counts) them again
+        return used
+
+    def _usable(self, st: _Laser, scan: LaserScan) -> bool:
+        """False (counted, and logged) for a scan older than the laser's last one or without usable beam angles."""
         if st.t_ns is not None and scan.t_ns < st.t_ns:
             self.dropped_scans[scan.sensor] += 1
             log.debug("laser %s: dropped a scan at %d ns, older than the last one (%d ns)", scan.sensor,
                       scan.t_ns, st.t_ns)
-            return []
+            return False
         if not (math.isfinite(scan.angle_min_rad) and math.isfinite(scan.angle_increment_rad)
                 and scan.angle_increment_rad != 0):
             self.dropped_scans[scan.sensor] += 1
@@ -1122,7 +1164,11 @@ class LaserVehicleDetector:
                 self._warned.add(scan.sensor)
                 log.warning("laser %s: dropping scans without usable beam angles (angle_min %s, increment %s)",
                             scan.sensor, scan.angle_min_rad, scan.angle_increment_rad)
-            return []
+            return False
+        return True
+
+    def _background_of(self, st: _Laser, scan: LaserScan) -> None:
+        """The laser's background, made at its first scan and relearnt when the scan geometry changes."""
         geometry = (scan.n_beams, scan.angle_min_rad, scan.angle_increment_rad)
         if st.background is None:
             r_min = scan.range_min_m if math.isfinite(scan.range_min_m) and scan.range_min_m > 0 else 0.0
@@ -1133,11 +1179,31 @@ class LaserVehicleDetector:
             log.warning("laser %s: scan geometry changed from %s to %s (beams, angle_min, increment); "
                         "relearning its background", scan.sensor, st.geometry, geometry)
             st.background.reset(max(scan.n_beams, 1))
+            st.primed_ns = None
         st.geometry = geometry
+
+    def __call__(self, scan: LaserScan) -> list[Detection]:
+        """Process one scan; the detections of its vehicles (road frame), ``[]`` while the background learns.
+
+        Raises
+        ------
+        ConfigError
+            ``scan.sensor`` is not one of the configured scanners.
+        """
+        st = self._state(scan.sensor)
+        if not self._usable(st, scan):
+            return []
+        self._background_of(st, scan)
         self._predict(st, scan.t_ns)
         r = scan.valid_ranges_m()
-        fg = st.background.update(self._free_as_far(scan, st.background.range_max_m)) if r.size else \
-            np.zeros(0, bool)
+        free = self._free_as_far(scan, st.background.range_max_m) if r.size else None
+        if free is None:
+            fg = np.zeros(0, bool)
+        elif st.primed_ns is not None and scan.t_ns <= st.primed_ns:  # already learnt from: classify only
+            fg = st.background.foreground(free)
+        else:
+            st.primed_ns = None
+            fg = st.background.update(free)
         beams = np.flatnonzero(fg)
         if beams.size and self.roi is not None:
             beams = beams[self.roi.contains(self._to_road(st, scan, beams, r))]
