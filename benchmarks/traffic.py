@@ -10,7 +10,7 @@ it 0.7 s after. Metrics: vehicles within 2 m, truth sampled at the tracker's ins
 the monitored stretch (``AREA``).
 
     .venv/bin/python benchmarks/traffic.py [--seeds 0 1 2] [--seconds 60] [--keep DIR] [--camera-every K]
-        [--laser-every K] [--processing-scale S]
+        [--laser-every K] [--processing-scale S] [--prime-lasers]
     .venv/bin/python benchmarks/traffic.py --seeds 0 1 2 --incidents-from DIR
 
 Incidents: the pipeline runs the D8 rules online on the fusion + PF tracks; the learned behaviour model
@@ -270,6 +270,8 @@ def main() -> None:
     ap.add_argument("--laser-every", type=int, default=None, help="TrafficParams.laser_every (default: its own)")
     ap.add_argument("--processing-scale", type=int, default=None,
                     help="the cameras' VehicleDetectorParams.processing_scale (default: its own)")
+    ap.add_argument("--prime-lasers", action="store_true",
+                    help="TrafficParams.prime_lasers: learn the laser backgrounds from the first scans read ahead")
     ap.add_argument("--workers", type=int, default=None,
                     help="TrafficParams.workers for the speed run with camera workers (default: its own)")
     ap.add_argument("--incidents-from", type=Path, default=None,
@@ -292,6 +294,8 @@ def main() -> None:
         params = replace(params, camera={**params.camera, "processing_scale": args.processing_scale})
     if args.workers is not None:
         params = replace(params, workers=args.workers)
+    if args.prime_lasers:
+        params = replace(params, prime_lasers=True)
     tmp = None
     folder = args.keep
     if folder is None:
