@@ -225,10 +225,20 @@ def test_write_into_a_missing_folder_names_the_folder(tmp_path: Path) -> None:
     assert not (tmp_path / "no_dir").exists()
 
 
-def test_check_video_output_returns_the_codec_and_accepts_any_case(tmp_path: Path) -> None:
-    assert check_video_output(tmp_path / "a.MP4") == "mp4v"
-    assert check_video_output(tmp_path / "a.avi") == "MJPG"
-    assert check_video_output(tmp_path / "a.webm") == "VP80"
+@pytest.mark.parametrize(("name", "in_file"), [("a.MP4", b"FMP4"), ("a.avi", b"MJPG"), ("a.webm", b"VP80")])
+def test_the_suffix_picks_the_codec_in_any_case(tmp_path: Path, name: str, in_file: bytes) -> None:
+    """What OpenCV reads back from the written file: MPEG-4 Part 2 (FFmpeg's FMP4) in .mp4, Motion JPEG in .avi, VP8
+    in .webm (the one browsers play)."""
+    write_video(tmp_path / name, _frames(3), fps=10)
+    cap = cv2.VideoCapture(str(tmp_path / name))
+    try:
+        assert int(cap.get(cv2.CAP_PROP_FOURCC)).to_bytes(4, "little").upper() == in_file
+        assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 3
+    finally:
+        cap.release()
+
+
+def test_an_explicit_codec_is_the_callers_and_must_be_four_characters(tmp_path: Path) -> None:
     assert check_video_output(tmp_path / "a.gif", fourcc="MJPG") == "MJPG"  # an explicit codec: the caller's call
     with pytest.raises(ConfigError, match="fourcc: expected four characters"):
         check_video_output(tmp_path / "a.avi", fourcc="MJPEG")

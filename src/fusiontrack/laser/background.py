@@ -36,7 +36,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-__all__ = ["BeamBackground", "clean_ranges", "histogram_mode"]
+__all__ = ["BeamBackground", "all_initialised", "clean_ranges", "histogram_mode", "keep_primed_backgrounds"]
 
 log = logging.getLogger(__name__)
 
@@ -283,3 +283,22 @@ class BeamBackground:
         adopt = valid & np.isnan(bg)  # beam without a background yet (only with range_max_m = inf)
         bg[adopt] = r[adopt]
         return fg
+
+
+def all_initialised(states: Any) -> bool:
+    """Whether every scanner state (objects with a ``background``) has an initialised background: a priming pass
+    can stop."""
+    return all(st.background is not None and st.background.initialised for st in states)
+
+
+def keep_primed_backgrounds(states: Any) -> None:
+    """End a priming pass over scanner states (``background``, ``geometry``, ``primed_ns``, ``t_ns``): an initialised
+    background is kept and marked learnt up to its last scan (``primed_ns``: the tracking pass classifies scans up
+    to then without learning from them again); one not initialised is dropped, to be learnt online from the first
+    scan. The scan times are forgotten either way."""
+    for st in states:
+        if st.background is not None and st.background.initialised:
+            st.primed_ns = st.t_ns
+        else:
+            st.background, st.geometry, st.primed_ns = None, None, None
+        st.t_ns = None

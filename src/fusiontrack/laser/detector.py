@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from fusiontrack.errors import ConfigError
-from fusiontrack.laser.background import BeamBackground, InitMethod
+from fusiontrack.laser.background import BeamBackground, InitMethod, all_initialised, keep_primed_backgrounds
 from fusiontrack.laser.clustering import Segments, cluster_scan, mean_shift_segments
 from fusiontrack.types import Detection, LaserScan
 
@@ -200,14 +200,10 @@ class LaserPeopleDetector:
             self.update(scan)
             if scan.sensor in used:
                 used[scan.sensor] += 1
-            if all(st.background is not None and st.background.initialised for st in self._scanners.values()):
+            if all_initialised(self._scanners.values()):
                 break
+        keep_primed_backgrounds(self._scanners.values())
         for st in self._scanners.values():
-            if st.background is not None and st.background.initialised:
-                st.primed_ns = st.t_ns
-            else:
-                st.background, st.geometry, st.primed_ns = None, None, None
-            st.t_ns = None
             st.points_m = np.zeros((0, 2))
         self.dropped_scans = dict.fromkeys(self._scanners, 0)  # the tracking pass meets (and counts) them again
         return used

@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 
 from fusiontrack.errors import ConfigError
-from fusiontrack.laser.background import BeamBackground, InitMethod
+from fusiontrack.laser.background import BeamBackground, InitMethod, all_initialised, keep_primed_backgrounds
 from fusiontrack.laser.clustering import a8_runs
 from fusiontrack.laser.detector import planar_pose
 from fusiontrack.tracking import kalman
@@ -1139,14 +1139,9 @@ class LaserVehicleDetector:
             if scan.valid_ranges_m().size:
                 st.background.update(self._free_as_far(scan, st.background.range_max_m))
             used[scan.sensor] += 1
-            if all(x.background is not None and x.background.initialised for x in self._lasers.values()):
+            if all_initialised(self._lasers.values()):
                 break
-        for st in self._lasers.values():
-            if st.background is not None and st.background.initialised:
-                st.primed_ns = st.t_ns
-            else:
-                st.background, st.geometry, st.primed_ns = None, None, None
-            st.t_ns = None
+        keep_primed_backgrounds(self._lasers.values())
         self.dropped_scans = dict.fromkeys(self._lasers, 0)  # the tracking pass meets (and counts) them again
         return used
 
