@@ -41,6 +41,7 @@ log = logging.getLogger(__name__)
 CLASSES = (ObjectClass.PERSON.value, ObjectClass.BICYCLE.value, ObjectClass.CAR.value)
 MODEL_FILE = "object_classifier.json"
 FORMAT = "fusiontrack-samme-stumps-1"
+_WIDTH = WINDOW_FEATURES.index("width_m")
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -60,6 +61,12 @@ class ObjectClassifier:
         Class indices.
     alpha : (M,) float64
         Stump weights (AdaBoost's ``estimator_weights_``).
+    min_width_m : (C,) float64
+        The narrowest window (mean ``width_m``) of each class in the training data. :meth:`predict` does not give
+        a class to a window narrower than any of its training windows: the stumps never saw such a window of that
+        class, and what they say there is extrapolation (a single leg of 3 points, 8 cm wide, on a real bag came
+        out ``car``; the narrowest simulated car window is 0.28 m wide). Zeros (no limit) for a model file
+        without it.
     """
 
     classes: tuple[str, ...]
@@ -69,6 +76,11 @@ class ObjectClassifier:
     left: np.ndarray
     right: np.ndarray
     alpha: np.ndarray
+    min_width_m: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.min_width_m is None:
+            object.__setattr__(self, "min_width_m", np.zeros(len(self.classes)))
 
     def margins(self, X: Any) -> np.ndarray:
         """Share of the stumps' weight voting for each class, ``(m, C)`` in ``[0, 1]``, rows summing to 1."""
@@ -83,9 +95,15 @@ class ObjectClassifier:
         return out / max(float(self.alpha.sum()), 1e-12)
 
     def predict(self, X: Any) -> np.ndarray:
-        """The class with the largest margin, ``(m,)`` str."""
+        """The class with the largest margin among those whose training windows were ever as narrow as the
+        window (``min_width_m``; when none was, the class with the narrowest training window), ``(m,)`` str."""
         m = self.margins(X)
-        return np.array(self.classes, dtype=object)[np.argmax(m, axis=1)] if len(m) else np.zeros(0, object)
+        if not len(m):
+            return np.zeros(0, object)
+        width = np.asarray(X, dtype=np.float64)[:, _WIDTH]
+        seen = width[:, None] >= self.min_width_m  # (m, C)
+        seen[:, int(np.argmin(self.min_width_m))] = True  # (the narrowest class is the fallback)
+        return np.array(self.classes, dtype=object)[np.argmax(np.where(seen, m, -1.0), axis=1)]
 
     # ------------------------------------------------------------------------------------------------
     @classmethod
@@ -141,14 +159,17 @@ class ObjectClassifier:
                 lo = hi = 0
             left[j] = index[str(est.classes_[int(np.argmax(value[lo]))])]
             right[j] = index[str(est.classes_[int(np.argmax(value[hi]))])]
+        width = x[:, _WIDTH]
+        min_width = np.array([width[labels == c].min() if (labels == c).any() else 0.0 for c in classes])
         return cls(tuple(classes), WINDOW_FEATURES, feat, thr, left, right,
-                   np.asarray(ada.estimator_weights_[:m], np.float64))
+                   np.asarray(ada.estimator_weights_[:m], np.float64), min_width)
 
     def to_dict(self) -> dict[str, Any]:
         return {"format": FORMAT, "classes": list(self.classes), "features": list(self.features),
                 "feature": self.feature.tolist(),
                 "threshold": [None if not np.isfinite(v) else float(v) for v in self.threshold],
-                "left": self.left.tolist(), "right": self.right.tolist(), "alpha": self.alpha.tolist()}
+                "left": self.left.tolist(), "right": self.right.tolist(), "alpha": self.alpha.tolist(),
+                "min_width_m": np.asarray(self.min_width_m, np.float64).tolist()}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "<dict>") -> ObjectClassifier:
@@ -159,16 +180,19 @@ class ObjectClassifier:
             if features != WINDOW_FEATURES:
                 raise ValueError(f"features {features} differ from this version's {WINDOW_FEATURES}")
             thr = np.array([np.inf if v is None else v for v in data["threshold"]], np.float64)
+            min_width = data.get("min_width_m")
             out = cls(tuple(data["classes"]), features, np.asarray(data["feature"], np.int64), thr,
                       np.asarray(data["left"], np.int64), np.asarray(data["right"], np.int64),
-                      np.asarray(data["alpha"], np.float64))
+                      np.asarray(data["alpha"], np.float64),
+                      None if min_width is None else np.asarray(min_width, np.float64))
         except (KeyError, TypeError, ValueError) as err:
             raise ConfigError(f"{source}: not a fusiontrack classifier: {err}") from err
         shape = out.alpha.shape
         arrays = (out.feature, out.threshold, out.left, out.right, out.alpha)
         if len(shape) != 1 or any(a.shape != shape for a in arrays) or (out.feature < 0).any() or \
                 (out.feature >= len(features)).any() or (out.left < 0).any() or (out.right < 0).any() or \
-                (out.left >= len(out.classes)).any() or (out.right >= len(out.classes)).any():
+                (out.left >= len(out.classes)).any() or (out.right >= len(out.classes)).any() or \
+                out.min_width_m.shape != (len(out.classes),) or not np.isfinite(out.min_width_m).all():
             raise ConfigError(f"{source}: inconsistent classifier arrays (expected shape {shape})")
         return out
 
