@@ -418,14 +418,25 @@ def detector_for_recording(rec: Any, lasers: list[str], *, time_source: str = "h
                     "[sensors])", rec.paths[0], ", ".join(unposed), world_frame,
                     "they are taken" if len(unposed) > 1 else "it is taken", len(poses))
     if background == "none":
-        dparams = {"alpha": 0.0, "gamma": 0.0, **dparams}
+        dparams = {**UNLEARNT_BACKGROUND, **dparams}
     detector = LaserPeopleDetector(poses, **dparams)
-    if background == "none":  # learn "no return" on every beam, from scans that hold nothing
-        for sensor, scan in first.items():
-            bg = BeamBackground(1, **{k: v for k, v in dparams.items() if k in _BACKGROUND_ARGS})
-            blank = np.full(scan.n_beams, np.nan, np.float32)
-            for i in range(bg.n_init):
-                detector.update(LaserScan(scan.t_ns - (bg.n_init - i) * 1_000_000, sensor, scan.frame_id,
-                                          scan.angle_min_rad, scan.angle_increment_rad, scan.range_min_m,
-                                          scan.range_max_m, blank))
+    if background == "none":
+        for scan in first.values():
+            learn_no_return(detector, scan, dparams)
     return detector, poses
+
+
+UNLEARNT_BACKGROUND = {"alpha": 0.0, "gamma": 0.0}
+"""Detector parameters of a scanner on a moving platform (``background = "none"``): backgrounds that never learn
+(with :func:`learn_no_return` first)."""
+
+
+def learn_no_return(detector: LaserPeopleDetector, scan: LaserScan, dparams: Mapping[str, Any]) -> None:
+    """Make ``scan``'s scanner's background "no return" on every beam (its ``n_init`` scans holding nothing,
+    just before ``scan``), so that every return is foreground: a scanner on a moving platform."""
+    bg = BeamBackground(1, **{k: v for k, v in dparams.items() if k in _BACKGROUND_ARGS})
+    blank = np.full(scan.n_beams, np.nan, np.float32)
+    for i in range(bg.n_init):
+        detector.update(LaserScan(scan.t_ns - (bg.n_init - i) * 1_000_000, scan.sensor, scan.frame_id,
+                                  scan.angle_min_rad, scan.angle_increment_rad, scan.range_min_m,
+                                  scan.range_max_m, blank))

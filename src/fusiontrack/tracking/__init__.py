@@ -11,9 +11,11 @@ The block diagram, one module per block (ALGORITHMS.md sections in brackets):
 - :mod:`.tracker` — the stateful laser people tracker that strings them together (B6-B10, B17), and
   :func:`track_recording` (detector + tracker over a recording)
 - :mod:`.baseline` — constant-velocity Kalman + Hungarian tracker, the comparison baseline
+- :mod:`.online` — :class:`OnlineLaserTracker`: detector + tracker fed one scan at a time (a live scanner)
 """
 
 from .baseline import CVKalmanTracker
+from .online import OnlineLaserTracker
 from .tracker import LaserPeopleTracker, TrackerParams, track_recording
 
-__all__ = ["CVKalmanTracker", "LaserPeopleTracker", "TrackerParams", "track_recording"]
+__all__ = ["CVKalmanTracker", "LaserPeopleTracker", "OnlineLaserTracker", "TrackerParams", "track_recording"]

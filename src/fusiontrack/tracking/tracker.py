@@ -88,7 +88,6 @@ import dataclasses
 import itertools
 import logging
 import math
-import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -1785,55 +1784,26 @@ def run_tracker(trk: Any, detector: Any, poses: Mapping[str, np.ndarray], stream
                 timings: dict[str, list[float]] | None = None) -> tuple[list[TrackState], list[Event]]:
     """Step a tracker through a time-ordered stream of laser scans (the loop of :func:`track_recording`).
 
-    Each scan updates ``detector``; when the next scan has another time stamp, the detections at the pending
-    time go to ``trk.step`` (any tracker with ``step(t_ns, detections)``, ``events`` and ``finish()``), and the
-    states through a :class:`~fusiontrack.tracking.classify.TrackClassifier` when ``classify``. With
+    The scans go one by one through an :class:`~fusiontrack.tracking.online.OnlineLaserTracker` (what a live
+    run uses): each scan updates ``detector``; when the next scan has another time stamp, the detections at the
+    pending time go to ``trk.step`` (any tracker with ``step(t_ns, detections)``, ``events`` and ``finish()``),
+    and the states through a :class:`~fusiontrack.tracking.classify.TrackClassifier` when ``classify``. With
     ``auto_area`` the covered area is read off the learnt backgrounds (:func:`area_from_backgrounds`) once
     there are detections. ``total`` (scans) scales ``progress``; ``timings`` as in :func:`track_recording`.
     """
-    from .classify import TrackClassifier
+    from .online import OnlineLaserTracker
 
-
-    geometries: dict[str, tuple[float, float]] = {}
-    classifier = TrackClassifier() if classify else None
+    online = OnlineLaserTracker.from_parts(trk, detector, poses, auto_area=auto_area, classify=classify,
+                                           timings=timings)
     states: list[TrackState] = []
     events: list[Event] = []
-    pending_t: int | None = None
-    t_det = 0.0
-
-    def run_step(t: int, t_det: float) -> None:
-        nonlocal auto_area
-        t0 = time.perf_counter()
-        dets = detector.detect(t)
-        t1 = time.perf_counter()
-        if auto_area and dets:
-            polygon = area_from_backgrounds(detector, geometries, poses)
-            if polygon is not None:
-                trk.area_m = polygon
-                auto_area = False
-        t2 = time.perf_counter()
-        new = trk.step(t, dets)
-        states.extend(classifier.update(t, new, dets) if classifier is not None else new)
-        t3 = time.perf_counter()
-        events.extend(trk.events)
-        if timings is not None:
-            timings.setdefault("detect_s", []).append(t_det + (t1 - t0))
-            timings.setdefault("track_s", []).append(t3 - t2)
-
     for done, scan in enumerate(stream, start=1):
-        if pending_t is not None and scan.t_ns != pending_t:
-            run_step(pending_t, t_det)
-            t_det = 0.0
-        t0 = time.perf_counter()
-        detector.update(scan)
-        t_det += time.perf_counter() - t0
-        geometries[scan.sensor] = (scan.angle_min_rad, scan.angle_increment_rad)
-        pending_t = scan.t_ns
+        states.extend(online.feed(scan))
+        events.extend(online.take_events())
         if progress is not None and done % 100 == 0:
             progress(min(done / max(total, 1), 1.0))
-    if pending_t is not None:
-        run_step(pending_t, t_det)
-    events.extend(trk.finish())
+    states.extend(online.close())
+    events.extend(online.take_events())
     if progress is not None:
         progress(1.0)
     return states, events
@@ -1898,7 +1868,7 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
     from ..io.recording import LASERSCAN, Recording
     from ..io.sync import synchronize
     from ..laser.detector import detector_for_recording
-    from .baseline import CVKalmanTracker
+    from .online import make_tracker
 
     if tracker not in ("pf", "kalman"):
         raise ConfigError(f"tracker: expected 'pf' or 'kalman', got {tracker!r}")
@@ -1921,14 +1891,8 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
         if background == "prime":
             detector.prime(synchronize(rec.messages(lasers, time_source=time_source),
                                        clock_corrections_ns=clock_corrections_ns))
-        area = None if isinstance(area_m, str) else area_m
-        if tracker == "pf":
-            trk: Any = LaserPeopleTracker(params, area_m=area, rng=rng)
-        else:
-            trk = CVKalmanTracker(**{"area_m": area, **dict(params or {})})
+        trk = make_tracker(tracker, params, area_m, rng)
         auto_area = isinstance(area_m, str)
-        if auto_area and area_m != "auto":
-            raise ConfigError(f"area_m: expected 'auto', None, a rectangle or a polygon, got {area_m!r}")
         stream = synchronize(rec.messages(lasers, time_source=time_source),
                              clock_corrections_ns=clock_corrections_ns)
         states, events = run_tracker(trk, detector, poses, stream, total=total, auto_area=auto_area,
