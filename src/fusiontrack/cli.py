@@ -526,7 +526,8 @@ def track(
                 recordings, params=fusion_params, tracker_params=cfg.tracking or None, camera_topic=camera_topic,
                 topics=topics, time_source=time_source, clock_corrections_ns=cfg.clock_corrections_ns(),
                 detector_params=cfg.laser or None, rng=seed, area_m=area_m, timings=timings,
-                adaptive_bias=camera_bias, progress=lambda f: bar.update(task, completed=f))
+                adaptive_bias=camera_bias, progress=lambda f: bar.update(task, completed=f),
+                laser_poses=cfg.laser_poses())
             if not fstats.camera:
                 console.print("[yellow]no usable camera: people tracked with the lasers only[/yellow]")
             elif fstats.bias is not None:
@@ -545,7 +546,7 @@ def track(
                 recordings, tracker=tracker_kind, params=cfg.tracking or None, topics=topics,
                 time_source=time_source, clock_corrections_ns=cfg.clock_corrections_ns(),
                 detector_params=cfg.laser or None, rng=seed, area_m=area_m, timings=timings,
-                progress=lambda f: bar.update(task, completed=f))
+                progress=lambda f: bar.update(task, completed=f), laser_poses=cfg.laser_poses())
     output.mkdir(parents=True, exist_ok=True)
     write_tracks_csv(output / "tracks.csv", states)
     write_jsonl(output / "tracks.jsonl", [*states, *events])

@@ -111,6 +111,12 @@ class PipelineConfig(_Model):
     """The traffic pipeline's settings (``TrafficParams.from_mapping``: rate_hz, fusion, tracker, kalman, laser,
     camera; checked by it)."""
 
+    def laser_poses(self) -> dict[str, np.ndarray]:
+        """topic -> laser2world ``(4, 4)`` of the lasers whose table gives a ``pose``: they override the
+        recording's ``/tf_static`` (the laser pipelines' ``laser_poses``)."""
+        return {s.topic: s.pose.matrix() for s in self.sensors.values()
+                if s.kind == SensorKind.LASER and "pose" in s.model_fields_set}
+
     def topics(self) -> dict[str, str]:
         """topic -> sensor name, for :class:`fusiontrack.io.Recording`'s ``sensors`` argument."""
         out = {}

@@ -1387,7 +1387,8 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
                 detector_params: Mapping[str, Any] | None = None, rng: np.random.Generator | int | None = 0,
                 world_frame: str = "world", timings: dict[str, list[float]] | None = None,
                 classify: bool = True, frames_wrapper: Callable[[Any], FrameSource] | None = None,
-                background: str = "prime") -> tuple[list[TrackState], list[Event], FusionStats]:
+                background: str = "prime", laser_poses: Mapping[str, Any] | None = None,
+                ) -> tuple[list[TrackState], list[Event], FusionStats]:
     """Track the people of a recording with its laser scans and one camera (seed 001's fused pipeline).
 
     Like :func:`~fusiontrack.tracking.tracker.track_recording` (same detector, synchronisation, area and
@@ -1481,7 +1482,8 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         total = sum(c.msgcount for c in rec.connections if c.topic in lasers)  # from the index or metadata
         check_background(background)
         detector, poses = detector_for_recording(rec, lasers, time_source=time_source, world_frame=world_frame,
-                                                 background="learn", detector_params=detector_params)
+                                                 background="learn", detector_params=detector_params,
+                                                 laser_poses=laser_poses)
         laser_corrections = {k: v for k, v in corrections.items() if k != cam_sensor}
         if background == "prime":
             detector.prime(synchronize(rec.messages(lasers, time_source=time_source),

@@ -358,11 +358,13 @@ def check_detector_params(params: Mapping[str, Any] | None, source: str = "laser
 
 def detector_for_recording(rec: Any, lasers: list[str], *, time_source: str = "header", world_frame: str = "world",
                            background: str = "learn", detector_params: Mapping[str, Any] | None = None,
+                           laser_poses: Mapping[str, Any] | None = None,
                            ) -> tuple[LaserPeopleDetector, dict[str, np.ndarray]]:
     """A :class:`LaserPeopleDetector` for the laser topics of an open recording.
 
-    Each scanner is posed by ``/tf_static`` (its frame, or else its sensor name, to ``world_frame``; the
-    identity when there is no such transform, i.e. the laser frame is the world).
+    Each scanner is posed by ``laser_poses`` when it names it (the user's word, e.g. a pipeline file's
+    ``[sensors.<name>] pose``), else by ``/tf_static`` (its frame, or else its sensor name, to ``world_frame``;
+    the identity when there is no such transform, i.e. the laser frame is the world).
 
     Parameters
     ----------
@@ -377,12 +379,14 @@ def detector_for_recording(rec: Any, lasers: list[str], *, time_source: str = "h
         return" and never learns, ``alpha = gamma = 0`` unless ``detector_params`` say otherwise).
     detector_params : mapping, optional
         Keyword arguments of the detector.
+    laser_poses : mapping of sensor or topic -> laser2world, optional
+        ``(3, 3)`` 2-D poses or ``(4, 4)`` transforms that override ``/tf_static``.
 
     Returns
     -------
-    detector, poses : the detector and each sensor's ``(4, 4)`` laser2world.
+    detector, poses : the detector and each sensor's laser2world.
     """
-    from fusiontrack.geometry import TransformTree
+    from fusiontrack.geometry import TransformTree, make_transform
 
     if background not in ("learn", "none"):
         raise ConfigError(f"background: expected 'learn' or 'none', got {background!r}")
@@ -399,27 +403,41 @@ def detector_for_recording(rec: Any, lasers: list[str], *, time_source: str = "h
         first.setdefault(scan.sensor, scan)
         if len(first) == len(lasers):
             break
+    given = dict(laser_poses or {})
+    given.update({rec.sensor_of(t): given[t] for t in lasers if t in given})  # given by topic
     poses: dict[str, np.ndarray] = {}
     unposed = []
     for sensor, scan in first.items():
-        pose = None
+        pose = given.get(sensor)
+        if pose is not None:
+            try:
+                R2, t2 = planar_pose(pose, f"laser_poses[{sensor!r}]")
+            except ValueError as err:
+                raise ConfigError(str(err)) from err
+            if np.shape(pose) == (3, 3):  # a 2-D pose: the same transform in 3-D, on the floor
+                R = np.eye(3)
+                R[:2, :2] = R2
+                pose = make_transform(R, [t2[0], t2[1], 0.0])
         for frame in (scan.frame_id, sensor):
-            if frame and tree.has_path(frame, world_frame):
+            if pose is None and frame and tree.has_path(frame, world_frame):
                 pose = tree.get(frame, world_frame)
-                break
         if pose is None:
             unposed.append(sensor)
-        poses[sensor] = np.eye(4) if pose is None else pose
+        poses[sensor] = np.eye(4) if pose is None else np.asarray(pose, np.float64)
     if not poses:
         raise ConfigError(f"{rec.paths[0]}: the laser topics {', '.join(lasers)} hold no scans")
     if len(poses) > 1 and unposed:
         log.warning("%s: no /tf_static transform from %s to %r, so %s at the world origin: the %d scanners' "
-                    "detections will not line up (record /tf_static, or name one scanner in a pipeline file's "
-                    "[sensors])", rec.paths[0], ", ".join(unposed), world_frame,
+                    "detections will not line up (record /tf_static, or give each scanner's pose in a pipeline "
+                    "file: [sensors.<name>] kind = \"laser\", topic, pose = {x, y, yaw_deg})", rec.paths[0],
+                    ", ".join(unposed), world_frame,
                     "they are taken" if len(unposed) > 1 else "it is taken", len(poses))
     if background == "none":
         dparams = {**UNLEARNT_BACKGROUND, **dparams}
-    detector = LaserPeopleDetector(poses, **dparams)
+    try:
+        detector = LaserPeopleDetector(poses, **dparams)
+    except ValueError as err:  # a bad pose given in laser_poses
+        raise ConfigError(str(err)) from err
     if background == "none":
         for scan in first.values():
             learn_no_return(detector, scan, dparams)

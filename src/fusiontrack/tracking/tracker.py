@@ -1816,12 +1816,13 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
                     clock_corrections_ns: Mapping[str, int] | None = None,
                     detector_params: Mapping[str, Any] | None = None, rng: np.random.Generator | int | None = 0,
                     world_frame: str = "world", timings: dict[str, list[float]] | None = None,
-                    background: str = "prime", classify: bool = True) -> tuple[list[TrackState], list[Event]]:
+                    background: str = "prime", classify: bool = True,
+                    laser_poses: Mapping[str, Any] | None = None) -> tuple[list[TrackState], list[Event]]:
     """Detect and track the people in a recording's laser scans.
 
     Builds a :class:`~fusiontrack.laser.LaserPeopleDetector` from the laser topics (each scanner posed by
-    ``/tf_static``: its frame to ``world_frame``; the identity when there is no such transform, i.e. tracks
-    in the laser frame), puts the scans on one clock and in time order
+    ``laser_poses`` if given, else by ``/tf_static``: its frame to ``world_frame``; the identity when there is no
+    such transform, i.e. tracks in the laser frame), puts the scans on one clock and in time order
     (:func:`fusiontrack.io.sync.synchronize`) and steps the tracker once per scan time.
 
     Parameters
@@ -1858,6 +1859,9 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
     classify : bool
         Give each track its class (person / bicycle / car) with :class:`~fusiontrack.tracking.classify.
         TrackClassifier` (B18); its time is part of ``"track_s"``.
+    laser_poses : mapping of topic -> laser2world, optional
+        Scanner poses (``(3, 3)`` 2-D or ``(4, 4)``) that override ``/tf_static``: a pipeline file's
+        ``[sensors.<name>] pose`` (:meth:`fusiontrack.config.PipelineConfig.laser_poses`).
 
     Returns
     -------
@@ -1887,7 +1891,7 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
             raise ConfigError(f"background: expected 'prime', 'learn' or 'none', got {background!r}")
         detector, poses = detector_for_recording(rec, lasers, time_source=time_source, world_frame=world_frame,
                                                  background="none" if background == "none" else "learn",
-                                                 detector_params=detector_params)
+                                                 detector_params=detector_params, laser_poses=laser_poses)
         if background == "prime":
             detector.prime(synchronize(rec.messages(lasers, time_source=time_source),
                                        clock_corrections_ns=clock_corrections_ns))
