@@ -768,6 +768,12 @@ def _read_truth(path: Path, topic: str | None, time_source: str) -> tuple[list[A
     from .io.recording import Recording
     from .types import GroundTruth
 
+    if path.suffix.lower() == ".csv" and path.is_file():
+        from .io.tracks import read_ground_truth_csv
+
+        if topic is not None:
+            raise ConfigError(f"--topic {topic}: {path} is a CSV file, not a recording (it has no topics)")
+        return read_ground_truth_csv(path), path.name
     with Recording(path) as rec:
         info = rec.topics()
         if topic is None:
@@ -806,7 +812,9 @@ def _read_truth(path: Path, topic: str | None, time_source: str) -> tuple[list[A
 def eval_(
     tracks: Annotated[Path, typer.Argument(help="tracks.csv / tracks.jsonl (or the folder of `fusiontrack track`),"
                                                 " or a MOTChallenge result file.")],
-    ground_truth: Annotated[Path, typer.Argument(help="Recording with ground truth, or a MOTChallenge gt file.")],
+    ground_truth: Annotated[Path, typer.Argument(help="Recording with ground truth; a CSV of floor positions "
+                                                      "(header: t or t_ns, id, x, y[, class]; metres); or a "
+                                                      "MOTChallenge gt file.")],
     threshold: Annotated[float, typer.Option(help="Floor-plane match distance in metres.")] = 0.5,
     topic: Annotated[str | None, typer.Option(help="Ground-truth topic (default: /ground_truth, or the only one).")
                      ] = None,

@@ -52,6 +52,7 @@ __all__ = [
     "format_time_s",
     "group_tracks",
     "parse_time_s",
+    "read_ground_truth_csv",
     "read_jsonl",
     "read_mot",
     "read_tracks_csv",
@@ -226,6 +227,69 @@ def read_tracks_csv(path: str | Path, sensor: str = "tracker") -> list[TrackStat
             except (ValueError, TypeError) as err:
                 raise RecordingError(f"{path}, line {lineno}: {err}") from err
     return states
+
+
+def read_ground_truth_csv(path: str | Path, sensor: str = "ground_truth") -> list[GroundTruth]:
+    """Floor-plane ground truth from a CSV file: one row per person and time, grouped into frames.
+
+    The header names the columns; these are read, any others ignored: ``t`` (decimal seconds) or ``t_ns``
+    (integer nanoseconds), ``id`` (an integer), ``x`` and ``y`` (metres, in the tracks' world frame), and
+    optionally ``class`` (default ``person``). So a ``tracks.csv`` of ``fusiontrack track``, the simulator's
+    ``ground_truth/agents.csv`` and a hand-made ``t,id,x,y`` file all read. Times need not be sorted.
+
+    Raises
+    ------
+    RecordingError
+        Missing file or columns, a bad value, or an id twice at one time (file and line named).
+    """
+    path = Path(path)
+    what = "a ground-truth CSV with a header holding t (s) or t_ns, id, x, y (m) and optionally class"
+    rows: dict[int, list[tuple[int, float, float, str, int]]] = {}
+    with _open_for_reading(path, what) as f:
+        reader = csv.reader(f)
+        header = next(reader, None)
+        if header is None:
+            raise RecordingError(f"{path}: empty file (expected {what})")
+        names = [h.strip() for h in header]
+        time_col = "t_ns" if "t_ns" in names else "t"
+        missing = [c for c in (time_col, "id", "x", "y") if c not in names]
+        if missing:
+            raise RecordingError(f"{path}, line 1: header {','.join(names)} lacks {', '.join(missing)} "
+                                 f"(expected {what})")
+        col = {c: names.index(c) for c in (time_col, "id", "x", "y", "class") if c in names}
+        for row in reader:
+            if not row or not "".join(row).strip():
+                continue
+            lineno = reader.line_num
+            if len(row) != len(names):
+                raise RecordingError(f"{path}, line {lineno}: {len(row)} fields, expected {len(names)} like the "
+                                     f"header")
+            try:
+                text = row[col[time_col]]
+                t_ns = int(text) if time_col == "t_ns" else parse_time_s(text)
+                tid = row[col["id"]].strip()
+                if not tid.lstrip("-").isdigit():
+                    raise ValueError(f"id: expected an integer, got {tid!r}")
+                x, y = float(row[col["x"]]), float(row[col["y"]])
+                if not (math.isfinite(x) and math.isfinite(y)):
+                    raise ValueError(f"x, y: expected finite metres, got {x}, {y}")
+            except (ValueError, TypeError) as err:
+                raise RecordingError(f"{path}, line {lineno}: {err}") from err
+            cls = row[col["class"]].strip() if "class" in col else "person"
+            rows.setdefault(t_ns, []).append((int(tid), x, y, cls, lineno))
+    frames = []
+    for t_ns in sorted(rows):
+        people = rows[t_ns]
+        ids = [r[0] for r in people]
+        if len(set(ids)) != len(ids):
+            twice = next(r for k, r in enumerate(people) if r[0] in ids[:k])
+            raise RecordingError(f"{path}, line {twice[4]}: id {twice[0]} twice at t = {format_time_s(t_ns)} s")
+        frames.append(GroundTruth(t_ns, sensor, "world", np.array(ids, np.int64),
+                                  np.array([[r[1], r[2]] for r in people], np.float64),
+                                  classes=tuple(r[3] for r in people)))
+    if not frames:
+        raise RecordingError(f"{path}: no rows (expected {what})")
+    return frames
 
 
 # --------------------------------------------------------------------------------------------------
