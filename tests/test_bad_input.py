@@ -161,6 +161,13 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         (["eval", "{tracks}", "{demo}", "--time", "lgo"], "--time: expected 'header' or 'log', got 'lgo'"),
         (["eval", "{tracks}", "{demo}", "--topic", "/gt_wrong"], "/gt_wrong"),
         (["eval", "{mot}", "{a_dir}"], "a_dir: a folder that is not a recording"),
+        # ground truth that is not there, is not ground truth, or has no identities: what eval reads instead
+        (["eval", "{tracks}", "{demo}"], "no ground-truth topic (fusiontrack_msgs/msg/GroundTruth or "
+                                         "leg_tracker/msg/Person); give the truth as a CSV file (t or t_ns, id, x, y)"),
+        (["eval", "{tracks}", "{demo}", "--topic", "/scan"], "--topic /scan: sensor_msgs/msg/LaserScan is not "
+                                                             "ground truth"),
+        (["eval", "{tracks}", "{legs}", "--topic", "/leg_cluster_positions"],
+         "--topic /leg_cluster_positions: its geometry_msgs/msg/PoseArray positions carry no identities"),
         # calibrate from control points: the file and the flags, not the library's function
         (["calibrate", "camera_0", "-c", "{hall}", "--points", "{two_points}", "--intrinsics", "500,500,320,240",
           "--dry-run"], "two_points.csv: 2 control points given, at least 4 are needed"),
@@ -189,6 +196,7 @@ def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args
     tracks = tmp_path / "tracks.csv"
     write_tracks_csv(tracks, [TrackState(10**18, "laser", 1, np.zeros(2), np.zeros(2))])
     subst = {"demo": str(shared_data / DEMO), "out": str(tmp_path / "o"), "cfg": str(cfg), "junk": str(junk),
+             "legs": str(shared_data / "laser/leg_tracker_demo/training/positive_1_extracted.bag"),
              "a_file": str(tmp_path / "a_file"), "a_dir": str(tmp_path / "a_dir"), "tracks": str(tracks),
              "hall": str(tmp_path / "hall.toml"), "two_points": str(tmp_path / "two_points.csv"),
              "mot": str(tmp_path / "det.txt"),

@@ -765,6 +765,8 @@ def _read_tracks(path: Path) -> tuple[list[Any], list[Any]]:
 
 
 def _read_truth(path: Path, topic: str | None, time_source: str) -> tuple[list[Any], str]:
+    import numpy as np
+
     from .io.recording import Recording
     from .types import GroundTruth
 
@@ -781,9 +783,12 @@ def _read_truth(path: Path, topic: str | None, time_source: str) -> tuple[list[A
                                                                     "leg_tracker/msg/Person")]
             topic = "/ground_truth" if "/ground_truth" in candidates else (candidates[0] if len(candidates) == 1
                                                                            else None)
+            if topic is None and not candidates:
+                raise ConfigError(f"{path}: no ground-truth topic (fusiontrack_msgs/msg/GroundTruth or "
+                                  f"leg_tracker/msg/Person); give the truth as a CSV file (t or t_ns, id, x, y)")
             if topic is None:
                 raise ConfigError(f"{path}: say which ground-truth topic to use with --topic "
-                                  f"(found {', '.join(candidates) or 'none'})")
+                                  f"(found {', '.join(candidates)})")
         if topic not in info:
             raise ConfigError(f"--topic {topic}: {path} has no such topic; it has: {', '.join(sorted(info))}")
         if info[topic].msgtype == "leg_tracker/msg/Person":
@@ -805,6 +810,13 @@ def _read_truth(path: Path, topic: str | None, time_source: str) -> tuple[list[A
                 frames = [with_time(f, by_log[f.t_ns]) for f in frames]
         else:
             frames = [m for m in rec.messages([topic], time_source=time_source) if isinstance(m, GroundTruth)]
+            if not frames:
+                raise ConfigError(f"--topic {topic}: {info[topic].msgtype} is not ground truth; eval reads "
+                                  f"fusiontrack_msgs/msg/GroundTruth or leg_tracker/msg/Person topics, or a CSV "
+                                  f"file (t or t_ns, id, x, y)")
+            if all(not len(f.ids) or (np.asarray(f.ids) < 0).all() for f in frames):
+                raise ConfigError(f"--topic {topic}: its {info[topic].msgtype} positions carry no identities, "
+                                  f"which scoring tracks needs; give the truth as a CSV file (t or t_ns, id, x, y)")
     return frames, topic
 
 
