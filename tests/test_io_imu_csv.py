@@ -158,11 +158,36 @@ def test_generic_t_ns_exact_and_column_order(tmp_path: Path) -> None:
 def test_generic_header_errors(tmp_path: Path) -> None:
     p = tmp_path / "phone.csv"
     p.write_text("time,ax,ay,az\n1,0,0,9.8\n")
-    with pytest.raises(RecordingError, match=r"phone\.csv, line 1: header .*t_ns or t_s"):
+    with pytest.raises(RecordingError, match=r"phone\.csv, line 1: header .*t_ns, t_ms or t_s"):
         read_imu_csv(p)
     p.write_text("t_s,ax,ay,az,gx\n1,0,0,9.8,0\n")
     with pytest.raises(RecordingError, match="only some of gx, gy, gz"):
         read_imu_csv(p)
+
+
+def test_generic_units_are_checked_where_they_show(tmp_path: Path) -> None:
+    # a phone at rest, turning at 1 rad/s: the specific force is g upwards (9.81 m/s^2)
+    p = tmp_path / "phone.csv"
+    rows = [(k * 0.01, 0.1, 0.2, 9.81, 0.0, 0.0, 1.0) for k in range(50)]
+
+    def write(header: str, t_scale: float = 1.0, a_scale: float = 1.0, g_scale: float = 1.0) -> Path:
+        p.write_text(header + "\n" + "".join(f"{t * t_scale:.6f},{ax * a_scale},{ay * a_scale},{az * a_scale},"
+                                             f"{gx * g_scale},{gy * g_scale},{gz * g_scale}\n"
+                                             for t, ax, ay, az, gx, gy, gz in rows))
+        return p
+
+    ref = read_imu_csv(write("t_s,ax,ay,az,gx,gy,gz"))
+    # milliseconds under their own name: the same samples
+    ms = read_imu_csv(write("t_ms,ax,ay,az,gx,gy,gz", t_scale=1e3))
+    np.testing.assert_array_equal(ms.t_ns, ref.t_ns)
+    # milliseconds since 1970 under t_s, accelerations in g, a gyroscope in deg/s: each named, with the remedy
+    rows = [(1.7e9 + t, *rest) for t, *rest in rows]
+    with pytest.raises(RecordingError, match=r"t_s reaches 1\.7e\+12, which is milliseconds .*name the column t_ms"):
+        read_imu_csv(write("t_s,ax,ay,az,gx,gy,gz", t_scale=1e3))
+    with pytest.raises(RecordingError, match=r"median magnitude is 1, not about 9\.81.*values in g: multiply by"):
+        read_imu_csv(write("t_s,ax,ay,az,gx,gy,gz", a_scale=1 / 9.81))
+    with pytest.raises(RecordingError, match=r"gyroscope reaches 57\.3.*in rad/s \(values in deg/s"):
+        read_imu_csv(write("t_s,ax,ay,az,gx,gy,gz", g_scale=180 / np.pi))
 
 
 # -- errors ----------------------------------------------------------------------------------------

@@ -1154,8 +1154,9 @@ def train_classifier(
 
 @app.command()
 def pdr(
-    source: Annotated[Path, typer.Argument(help="Phone IMU: a CSV (Oxford step-counter or generic "
-                                           "t,ax,ay,az[,gx,gy,gz]) or a recording with an Imu topic.")],
+    source: Annotated[Path, typer.Argument(help="Phone IMU: a CSV (Oxford step-counter, or generic with a header "
+                                           "t_s|t_ms|t_ns,ax,ay,az[,gx,gy,gz] in m/s^2 and rad/s) or a recording "
+                                           "with an Imu topic.")],
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder for steps.csv and trajectory.csv.")],
     step_model: Annotated[Path | None, typer.Option(help="Step-length model (JSON) from "
                                                     "`fusiontrack fit-step-model`.")] = None,

@@ -21,10 +21,13 @@ Three formats are understood (``format=`` names them; ``"auto"`` detects them):
     ignored, ``#`` comment lines and blank lines skipped)::
 
         t_ns,ax,ay,az[,gx,gy,gz]        # t_ns: integer nanoseconds
+        t_ms,ax,ay,az[,gx,gy,gz]        # t_ms: milliseconds (float), rounded to the nearest ns
         t_s,ax,ay,az[,gx,gy,gz]         # t_s: seconds (float), rounded to the nearest ns
 
     ``ax, ay, az`` in m/s^2 (specific force, gravity included, as phones report it); ``gx, gy, gz``
-    in rad/s. Without gyro columns the gyro is ``NaN``.
+    in rad/s. Without gyro columns the gyro is ``NaN``. Units are checked where they show: accelerations
+    whose median magnitude is under 3 m/s^2 (values in g, or gravity removed), a gyroscope beyond 35 rad/s
+    (values in deg/s) and ``t_s`` values that are milliseconds are errors that say so.
 
 Auto-detection: a folder, or a file named ``accelerometer.csv``, is ``oxford_optimisation``; otherwise
 the first data line decides: a header with letters is ``generic``, seven numbers are
@@ -224,16 +227,18 @@ def _read_optimisation(path: Path, sensor: str, frame_id: str) -> ImuCsv:
                   np.full((t_ns.size, 3), np.nan), step_times_ns=gt_times, hw_step_times_ns=hw_times)
 
 
-_GENERIC_DOC = "a header with t_ns or t_s, ax, ay, az and optionally gx, gy, gz"
+_GENERIC_DOC = "a header with t_ns, t_ms or t_s, ax, ay, az (m/s^2) and optionally gx, gy, gz (rad/s)"
+_G_MPS2 = 9.80665
+_PHONE_GYRO_MAX_RADPS = 35.0  # phone gyroscopes saturate at 2000 deg/s (34.9 rad/s)
 
 
 def _read_generic(path: Path, sensor: str, frame_id: str) -> ImuCsv:
     table = read_numeric_table(path, header=True, what=_GENERIC_DOC)
     names = [n.lower() for n in table.header or []]
     missing = [n for n in ("ax", "ay", "az") if n not in names]
-    if ("t_ns" not in names and "t_s" not in names) or missing:
+    if not {"t_ns", "t_ms", "t_s"} & set(names) or missing:
         raise RecordingError(f"{path}, line {int(table.line_numbers[0]) - 1}: header {table.header} "
-                             f"lacks {missing or ['t_ns or t_s']} (expected {_GENERIC_DOC})")
+                             f"lacks {missing or ['t_ns, t_ms or t_s']} (expected {_GENERIC_DOC})")
     if "t_ns" in names:
         t_ns = _int_column(path, table, names.index("t_ns"), "t_ns")
         col = names.index("t_ns")
@@ -241,17 +246,31 @@ def _read_generic(path: Path, sensor: str, frame_id: str) -> ImuCsv:
             exact = read_numeric_table(path, header=True, int_cols=(col,), what=_GENERIC_DOC)
             t_ns = exact.ints[col]
     else:
-        t_s = table.values[:, names.index("t_s")]
-        bad = np.flatnonzero(~np.isfinite(t_s))
+        name, scale = ("t_ms", 1e6) if "t_ms" in names else ("t_s", 1e9)
+        t = table.values[:, names.index(name)]
+        bad = np.flatnonzero(~np.isfinite(t))
         if bad.size:
-            raise RecordingError(f"{path}, line {int(table.line_numbers[bad[0]])}: t_s must be a finite number "
-                                 f"of seconds, got {t_s[bad[0]]!r}")
-        t_ns = np.rint(t_s * 1e9).astype(np.int64)
+            raise RecordingError(f"{path}, line {int(table.line_numbers[bad[0]])}: {name} must be a finite number, "
+                                 f"got {t[bad[0]]!r}")
+        if name == "t_s" and np.abs(t).max() > 1e11:  # past the year 5000 in seconds: milliseconds since 1970
+            raise RecordingError(f"{path}: t_s reaches {np.abs(t).max():.6g}, which is milliseconds (or finer), "
+                                 f"not seconds: name the column t_ms (or t_ns)")
+        t_ns = np.rint(t * scale).astype(np.int64)
     _check_time_order(path, t_ns, table.line_numbers)
     accel = table.values[:, [names.index(n) for n in ("ax", "ay", "az")]]
+    norm = np.linalg.norm(accel, axis=1)
+    if np.isfinite(norm).any() and np.nanmedian(norm) < 0.3 * _G_MPS2:
+        raise RecordingError(f"{path}: the acceleration's median magnitude is {np.nanmedian(norm):.3g}, not about "
+                             f"9.81: ax, ay, az must be the specific force in m/s^2, gravity included, as phones "
+                             f"report it (values in g: multiply by 9.81; gravity-free 'linear acceleration' will "
+                             f"not do)")
     gyro_names = ("gx", "gy", "gz")
     if all(n in names for n in gyro_names):
         gyro = table.values[:, [names.index(n) for n in gyro_names]]
+        if np.nanmax(np.abs(gyro), initial=0.0) > _PHONE_GYRO_MAX_RADPS:
+            raise RecordingError(f"{path}: the gyroscope reaches {np.nanmax(np.abs(gyro)):.4g}, beyond a phone "
+                                 f"gyroscope's range (2000 deg/s = 34.9 rad/s): gx, gy, gz must be in rad/s "
+                                 f"(values in deg/s: multiply by pi/180)")
     else:
         if any(n in names for n in gyro_names):
             raise RecordingError(f"{path}: header {table.header} has only some of gx, gy, gz "
