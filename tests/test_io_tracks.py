@@ -155,6 +155,14 @@ def test_mot_frame_mapping_and_world_xy(tmp_path: Path) -> None:
         write_mot(path, states)
 
 
+def test_mot_frames_numbered_from_0_are_refused(tmp_path: Path) -> None:
+    # read as 1-based, every box of a 0-based file would land one image early
+    path = tmp_path / "det.txt"
+    path.write_text("1,-1,10,20,30,40,0.9\n0,-1,10,20,30,40,0.8\n")
+    with pytest.raises(RecordingError, match=r"det\.txt, line 2: frame 0: MOTChallenge frames are numbered from 1"):
+        read_mot(path)
+
+
 @pytest.mark.skipif(not TUD.is_dir(), reason="MOT reference data not available")
 @pytest.mark.parametrize(("seq", "rows", "n_ids", "first_xyxy"), [
     ("TUD-Campus", 359, 8, [399, 182, 520, 411]),  # first line 1,1,399,182,121,229,1,-1,-1,-1

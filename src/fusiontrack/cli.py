@@ -860,6 +860,8 @@ def eval_(
     boxes_at = ConfigError("--at: only for floor-plane tracks (image boxes are scored at their camera's frames)")
     if at is not None and (camera is not None or tracks.suffix == ".txt"):  # refused before any scoring
         raise boxes_at
+    if ground_truth.suffix == ".txt" and tracks.is_dir() and (tracks / "tracks_mot.txt").is_file():
+        tracks = tracks / "tracks_mot.txt"  # a people-camera folder scored against a MOTChallenge gt file
     image = _eval_image_boxes(tracks, ground_truth, camera, time_source)
     if at is not None and image is not None:  # a people-camera output found by its folder
         raise boxes_at

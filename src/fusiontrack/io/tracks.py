@@ -361,6 +361,11 @@ def read_mot(path: str | Path) -> MotBoxes:
             i = int(bad[0])
             raise RecordingError(f"{path}, line {int(table.line_numbers[i])}: {name} {float(v[i, c])!r} is not "
                                  "a whole number")
+    low = np.flatnonzero(v[:, 0] < 1)
+    if low.size:  # read as 1-based, a 0-based file would put every box one image early
+        i = int(low[0])
+        raise RecordingError(f"{path}, line {int(table.line_numbers[i])}: frame {int(v[i, 0])}: MOTChallenge frames "
+                             f"are numbered from 1 (a file numbered from 0: add 1 to every frame)")
     n = v.shape[0]
     conf = v[:, 6].copy() if v.shape[1] > 6 else np.ones(n)
     boxes = MotBoxes(frame=v[:, 0].astype(np.int64), id=v[:, 1].astype(np.int64), boxes_ltwh=v[:, 2:6].copy(),
