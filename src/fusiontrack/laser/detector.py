@@ -96,7 +96,13 @@ class LaserPeopleDetector:
     c0_m : float
         A8 breakpoint constant for clustering the foreground beams (0.20 m).
     min_cluster_points : int
-        Foreground beam-order clusters smaller than this are dropped (A8 ``n_min`` = 2); 1 keeps all.
+        Foreground beam-order clusters smaller than this are dropped before the mean-shift (A8's ``n_min``);
+        the default 1 keeps all, and the mean-shift's ``min_segment_points`` decides. A8's ``n_min = 2`` [RECON]
+        drops every leg that only one beam hits: beyond about 9 m for a 0.375-degree scanner (legs 6 cm
+        across), beyond 4.6 m for a 0.75-degree one, so people far away or behind others vanished. Paired runs
+        (simulated crowd and groups, 30 s, seeds 0-5): MOTA 0.863 -> 0.912 and 0.904 -> 0.938, ID switches
+        34 -> 10 and 15 -> 7; the same crowd with every second beam dropped: MOTA 0.31 -> 0.75; the outdoor
+        leg_tracker bag: 0.922 -> 0.921.
     bandwidth_m, merge_m, min_segment_points :
         Mean-shift (B4): ``h`` = 0.40 m, modes closer than ``merge_m`` (default ``h / 2``) merge, segments
         need ``min_segment_points`` (3).
@@ -117,7 +123,7 @@ class LaserPeopleDetector:
 
     def __init__(self, scanners: Mapping[str, Any], *, alpha: float = 0.005, beta: float = 0.05,
                  gamma: float | None = None, tau_fg_m: float = 0.20, n_init: int = 50, init: InitMethod = "mode",
-                 bin_m: float = 0.05, c0_m: float = 0.20, min_cluster_points: int = 2, bandwidth_m: float = 0.40,
+                 bin_m: float = 0.05, c0_m: float = 0.20, min_cluster_points: int = 1, bandwidth_m: float = 0.40,
                  merge_m: float | None = None, min_segment_points: int = 3, pair_feet_m: float | None = 0.8,
                  foot_radius_m: float = 0.15, d_one_foot_m: float = 0.12,
                  min_sigma_m: float = 0.05, max_age_s: float = 0.2, sensor: str = "laser") -> None:
