@@ -29,7 +29,7 @@ Tables, all measured in this process, one run after another (no parallel load on
    within 0.5 m). The situation truth calls a pair merged below 0.6 m; where the simulated pairs walk
    (0.5-0.6 m) the segmentation is ambiguous, and so is the instant of a merge or split;
 5. scaling: time per scan for 5-80 people (``agents.mean_present``) in the ``crowd`` hall, and MOTA, also of the PF
-   with ``n_merge`` 3 (the setting for dense crowds);
+   with ``n_merge`` 3 (the setting for very dense crowds);
 6. the real outdoor bag of leg_tracker (one annotated person, 720 s, laser frame, 10 Hz): MOTA with the
    annotators' 0.75 m threshold, on the annotated scans (annotations after scan k belong to scan k);
 7. issue 4's targets beside this run's figures (MOTA >= 0.85; median time per scan <= 2 ms on every crowd seed;
@@ -338,9 +338,9 @@ def main() -> None:
                               f"{pf['m'].mota:.3f}", f"{r['pf_variant'].mota:.3f}", f"{kf['track_ms'][0]:.2f}",
                               f"{kf['m'].mota:.3f}")
             console.print(scale)
-            console.print("  n_merge 3 (merges confirmed over 3 frames) is the PF's setting for dense crowds: there "
-                          "most shared detections are a neighbour's occlusion (TrackerParams.n_merge); at 72 people "
-                          "the CV Kalman still scores higher")
+            console.print("  n_merge 3 (merges confirmed over 3 frames) is the PF's setting for very dense crowds "
+                          "(about 70 people): there most shared detections are a neighbour's occlusion "
+                          "(TrackerParams.n_merge); at 72 people the CV Kalman still scores higher")
 
         outdoor_result = None
         if not args.skip_outdoor:

@@ -210,11 +210,12 @@ class TrackerParams:
         IDSW over tracker seeds 0-2: crowd 0.886/0.874/43 -> 0.877/0.873/50, groups 0.927/0.903/4.7 ->
         0.942/0.938/3.3; but the fusion tests built on the laser tracker's splits of one side-by-side pair
         (appearance-decided splits, the identity check) lose the splits they need, so it is off until they are
-        looked at. **Dense crowds: use 3.** In ``benchmarks/laser_people.py``'s scaling hall (crowd, 20 s, seed 0),
-        MOTA with 35 / 72 people present is 0.735 / 0.378 with 1 and 0.749 / 0.465 with 3 (ID switches 62 / 262 ->
-        46 / 185; our CV Kalman: 0.765 / 0.526). There most shared detections are a neighbour occluding a person,
-        and merged targets place their members badly: with 1, in the 72-people run, 46 % of the merged states
-        reported while their segment is seen match nobody (CLEAR, 0.5 m) [RECON].
+        looked at. **Very dense crowds (about 70 people in view): use 3.** In ``benchmarks/laser_people.py``'s
+        scaling hall (crowd, 20 s, seed 0), MOTA with 35 / 72 people present is 0.867 / 0.456 with 1 and
+        0.825 / 0.566 with 3 (our CV Kalman: 0.866 / 0.659). At 72 most shared detections are a neighbour occluding
+        a person, and merged targets place their members badly [RECON]. (These figures are with the detector's
+        ``min_cluster_points`` 1; with 2, which lost far legs, 3 helped from 35 people on: 0.735 -> 0.749.)
+        The other figures above were measured with ``min_cluster_points`` 2.
     n_split : int
         Frames the split condition must hold before a merged target splits (hysteresis: two people side by
         side are one segment in one scan and two in the next; gaps up to ``candidate_gap_s`` do not restart
