@@ -65,7 +65,7 @@ class ObjectClassifier:
         The narrowest window (mean ``width_m``) of each class in the training data. :meth:`predict` does not give
         a class to a window narrower than any of its training windows: the stumps never saw such a window of that
         class, and what they say there is extrapolation (a single leg of 3 points, 8 cm wide, on a real bag came
-        out ``car``; the narrowest simulated car window is 0.28 m wide). Zeros (no limit) for a model file
+        out ``car``; the narrowest simulated car window is 0.56 m wide). Zeros (no limit) for a model file
         without it.
     """
 
