@@ -65,7 +65,9 @@ def test_tracks_csv_as_ground_truth_scores_itself_perfectly(crowd, tmp_path):
 
 @pytest.mark.parametrize(("text", "message"), [
     ("t,id,x\n0.0,1,2.0\n", r"line 1: header t,id,x lacks y"),
-    ("t,id,x,y\n0.0,person_1,2.0,3.0\n", r"line 2: id: expected an integer, got 'person_1'"),
+    ("t,id,x,y\n0.0,person_1,2.0,3.0\n", r"line 2: id: expected a whole number >= 0, got 'person_1'"),
+    ("t,id,x,y\n0.0,-1,2.0,3.0\n", r"line 2: id: expected a whole number >= 0, got '-1'"),
+    ("t,id,x,y,class\n0.0,1,2.0,3.0,pedestrian\n", r"line 2: class: expected one of person, bicycle, car"),
     ("t,id,x,y\n0.0,1,2.0,3.0\n0.0,1,2.5,3.0\n", r"line 3: id 1 twice at t = 0.000000000 s"),
     ("t,id,x,y\n0.0,1,nan,3.0\n", r"line 2: x, y: expected finite metres"),
     ("t,id,x,y\n0,1,2.0\n", r"line 2: 3 fields, expected 4"),
@@ -76,6 +78,16 @@ def test_bad_ground_truth_csv_is_named(tmp_path, text, message):
     (tmp_path / "gt.csv").write_text(text)
     with pytest.raises(RecordingError, match=message):
         read_ground_truth_csv(tmp_path / "gt.csv")
+
+
+def test_what_spreadsheets_and_numpy_write_reads_too(tmp_path):
+    # a byte-order mark, capitals, float ids, a float's noise and an exponent in t, an empty class
+    (tmp_path / "gt.csv").write_text("\ufeffT,ID,X,Y,Class\n0.30000000000000004,3.0,1.0,2.0,\n1e-1,3,0.5,2.0,car\n",
+                                     encoding="utf-8")
+    frames = read_ground_truth_csv(tmp_path / "gt.csv")
+    assert [f.t_ns for f in frames] == [100_000_000, 300_000_000]
+    assert [f.classes for f in frames] == [("car",), ("person",)]
+    assert frames[1].ids.tolist() == [3]
 
 
 def test_times_in_nanoseconds_and_unsorted_rows(tmp_path):

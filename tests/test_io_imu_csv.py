@@ -186,7 +186,7 @@ def test_generic_units_are_checked_where_they_show(tmp_path: Path) -> None:
         read_imu_csv(write("t_s,ax,ay,az,gx,gy,gz", t_scale=1e3))
     with pytest.raises(RecordingError, match=r"median magnitude is 1, not about 9\.81.*values in g: multiply by"):
         read_imu_csv(write("t_s,ax,ay,az,gx,gy,gz", a_scale=1 / 9.81))
-    with pytest.raises(RecordingError, match=r"gyroscope reaches 57\.3.*in rad/s \(values in deg/s"):
+    with pytest.raises(RecordingError, match=r"gyroscope's 99th percentile is 57\.3.*in rad/s \(values in deg/s"):
         read_imu_csv(write("t_s,ax,ay,az,gx,gy,gz", g_scale=180 / np.pi))
 
 

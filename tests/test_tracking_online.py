@@ -121,10 +121,17 @@ def test_bad_scanners_and_scans_are_named(crowd):
         OnlineLaserTracker(poses, tracker="ukf")
     with pytest.raises(ConfigError, match="min_segmnt_points"):
         OnlineLaserTracker(poses, detector_params={"min_segmnt_points": 3})
-    online = OnlineLaserTracker({next(iter(poses)): np.eye(4)})
-    other = next(s for s in scans if s.sensor != next(iter(poses)))
+    first = next(iter(poses))
+    online = OnlineLaserTracker({first: poses[first]})
+    own = [s for s in scans if s.sensor == first]
+    other = next(s for s in scans if s.sensor != first and s.t_ns > own[120].t_ns)
+    got = [st for s in own[:120] for st in online.feed(s)]
     with pytest.raises(ConfigError, match=other.sensor):
         online.feed(other)
+    # nothing lost with the error: the pending step comes with the next scan
+    got += online.feed(own[120])
+    assert {st.t_ns for st in got} <= {s.t_ns for s in own[:120]}
+    assert max(st.t_ns for st in got) == own[119].t_ns
     online.close()
     with pytest.raises(ConfigError, match="closed"):
         online.feed(scans[0])

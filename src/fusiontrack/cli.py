@@ -563,7 +563,7 @@ def track(
     if video:
         from .viz.preview import render_preview
 
-        drawn = render_preview(recordings, output / "tracks.mp4", tracks=states)
+        drawn = render_preview(recordings, output / "tracks.mp4", tracks=states, laser_poses=cfg.laser_poses())
         console.print(f"video: {output / 'tracks.mp4'} ({drawn.frames} frames)")
         if pipeline == "people" and fstats.camera:  # laser points, boxes, ids, situations, live bias
             from .viz.fused_overlay import render_fused_overlay
@@ -574,10 +574,14 @@ def track(
 
                 with Recording(recordings) as rec:
                     lasers = [rec.sensor_of(t) for t in topics]
+            from .io.recording import Recording
+
+            with Recording(recordings) as rec:  # the overlay names its lasers by sensor
+                poses = {rec.sensor_of(t): pose for t, pose in cfg.laser_poses().items()}
             ov = render_fused_overlay(recordings, output / "overlay.mp4", states, camera=fstats.camera,
                                       image_topic=camera_topic, bias_history=fstats.bias, events=events,
                                       time_source=time_source, clock_corrections_ns=cfg.clock_corrections_ns(),
-                                      lasers=lasers)
+                                      lasers=lasers, laser_poses=poses or None)
             console.print(f"overlay: {output / 'overlay.mp4'} ({ov.frames} frames)")
 
 
@@ -770,7 +774,7 @@ def _read_truth(path: Path, topic: str | None, time_source: str) -> tuple[list[A
     from .io.recording import Recording
     from .types import GroundTruth
 
-    if path.suffix.lower() == ".csv" and path.is_file():
+    if path.suffix.lower() == ".csv":
         from .io.tracks import read_ground_truth_csv
 
         if topic is not None:
@@ -814,7 +818,9 @@ def _read_truth(path: Path, topic: str | None, time_source: str) -> tuple[list[A
                 raise ConfigError(f"--topic {topic}: {info[topic].msgtype} is not ground truth; eval reads "
                                   f"fusiontrack_msgs/msg/GroundTruth or leg_tracker/msg/Person topics, or a CSV "
                                   f"file (t or t_ns, id, x, y)")
-            if all(not len(f.ids) or (np.asarray(f.ids) < 0).all() for f in frames):
+            if all(not len(f.ids) for f in frames):
+                raise ConfigError(f"--topic {topic}: its {len(frames)} frames hold nobody")
+            if all((np.asarray(f.ids) < 0).all() for f in frames if len(f.ids)):
                 raise ConfigError(f"--topic {topic}: its {info[topic].msgtype} positions carry no identities, "
                                   f"which scoring tracks needs; give the truth as a CSV file (t or t_ns, id, x, y)")
     return frames, topic
@@ -880,6 +886,8 @@ def eval_(
         frames, gt_topic = _read_truth(ground_truth, topic, time_source)
         scored, label = frames, f"{tracks.name} vs {gt_topic}"
         if at is not None:
+            if ground_truth.suffix.lower() == ".csv":
+                raise ConfigError(f"--at {at}: takes a topic's times from a recording; {ground_truth} is a CSV file")
             at_times = _topic_times(ground_truth, at, time_source)
             if not at_times:
                 raise ConfigError(f"--at {at}: {ground_truth} has no message on it")

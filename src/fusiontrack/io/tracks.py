@@ -42,7 +42,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from ..errors import ConfigError, RecordingError
-from ..types import Event, GroundTruth, Track, TrackState
+from ..types import Event, GroundTruth, ObjectClass, Track, TrackState
 from .csvtable import read_numeric_table
 
 __all__ = [
@@ -67,6 +67,7 @@ TRACKS_CSV_COLUMNS = ("t", "id", "x", "y", "vx", "vy", "class", "situation", "se
 MOT_COLUMNS = ("frame", "id", "bb_left", "bb_top", "bb_width", "bb_height", "conf", "x", "y", "z")
 
 JsonRecord = TrackState | Event | GroundTruth
+_CLASSES = tuple(c.value for c in ObjectClass)
 
 
 def _open_for_writing(path: Path) -> TextIO:
@@ -78,7 +79,7 @@ def _open_for_writing(path: Path) -> TextIO:
 
 def _open_for_reading(path: Path, what: str) -> TextIO:
     try:
-        return path.open(encoding="utf-8", newline="")
+        return path.open(encoding="utf-8-sig", newline="")  # (a spreadsheet's byte-order mark is not a column)
     except FileNotFoundError as err:
         raise RecordingError(f"{path}: no such file (expected {what})") from err
     except OSError as err:
@@ -229,13 +230,24 @@ def read_tracks_csv(path: str | Path, sensor: str = "tracker") -> list[TrackStat
     return states
 
 
+def _whole_number(text: str) -> int | None:
+    """``"7"`` or ``"7.0"`` -> 7; None for anything else."""
+    try:
+        v = float(text)
+    except ValueError:
+        return None
+    return int(v) if math.isfinite(v) and v == int(v) else None
+
+
 def read_ground_truth_csv(path: str | Path, sensor: str = "ground_truth") -> list[GroundTruth]:
     """Floor-plane ground truth from a CSV file: one row per person and time, grouped into frames.
 
-    The header names the columns; these are read, any others ignored: ``t`` (decimal seconds) or ``t_ns``
-    (integer nanoseconds), ``id`` (an integer), ``x`` and ``y`` (metres, in the tracks' world frame), and
-    optionally ``class`` (default ``person``). So a ``tracks.csv`` of ``fusiontrack track``, the simulator's
-    ``ground_truth/agents.csv`` and a hand-made ``t,id,x,y`` file all read. Times need not be sorted.
+    The header names the columns (in any case); these are read, any others ignored: ``t`` (seconds) or ``t_ns``
+    (integer nanoseconds), on the tracks' clock (a ``tracks.csv``'s ``t``: e.g. seconds since 1970 for a
+    recording's header stamps), ``id`` (a whole number >= 0), ``x`` and ``y`` (metres, in the tracks' world
+    frame), and optionally ``class`` (person, bicycle, car, group or unknown; empty: person). So a ``tracks.csv``
+    of ``fusiontrack track``, the simulator's ``ground_truth/agents.csv`` (read by its ``t_ns``: its ``t`` counts
+    from the start of the simulation) and a hand-made ``t,id,x,y`` file all read. Times need not be sorted.
 
     Raises
     ------
@@ -250,7 +262,7 @@ def read_ground_truth_csv(path: str | Path, sensor: str = "ground_truth") -> lis
         header = next(reader, None)
         if header is None:
             raise RecordingError(f"{path}: empty file (expected {what})")
-        names = [h.strip() for h in header]
+        names = [h.strip().lower() for h in header]
         time_col = "t_ns" if "t_ns" in names else "t"
         missing = [c for c in (time_col, "id", "x", "y") if c not in names]
         if missing:
@@ -265,17 +277,26 @@ def read_ground_truth_csv(path: str | Path, sensor: str = "ground_truth") -> lis
                 raise RecordingError(f"{path}, line {lineno}: {len(row)} fields, expected {len(names)} like the "
                                      f"header")
             try:
-                text = row[col[time_col]]
-                t_ns = int(text) if time_col == "t_ns" else parse_time_s(text)
-                tid = row[col["id"]].strip()
-                if not tid.lstrip("-").isdigit():
-                    raise ValueError(f"id: expected an integer, got {tid!r}")
+                text = row[col[time_col]].strip()
+                if time_col == "t_ns":
+                    t_ns = int(text)
+                else:
+                    try:
+                        t_ns = parse_time_s(text)
+                    except ValueError:  # 1e-1, or a float's noise (0.30000000000000004): to the nearest ns
+                        t_ns = round(float(text) * 1e9)
+                tid_text = row[col["id"]].strip()
+                tid = _whole_number(tid_text)
+                if tid is None or tid < 0:
+                    raise ValueError(f"id: expected a whole number >= 0, got {tid_text!r}")
                 x, y = float(row[col["x"]]), float(row[col["y"]])
                 if not (math.isfinite(x) and math.isfinite(y)):
                     raise ValueError(f"x, y: expected finite metres, got {x}, {y}")
-            except (ValueError, TypeError) as err:
+                cls = (row[col["class"]].strip() if "class" in col else "") or "person"
+                if cls not in _CLASSES:
+                    raise ValueError(f"class: expected one of {', '.join(_CLASSES)}, got {cls!r}")
+            except (ValueError, TypeError, OverflowError) as err:
                 raise RecordingError(f"{path}, line {lineno}: {err}") from err
-            cls = row[col["class"]].strip() if "class" in col else "person"
             rows.setdefault(t_ns, []).append((int(tid), x, y, cls, lineno))
     frames = []
     for t_ns in sorted(rows):

@@ -4,8 +4,9 @@ Per scan (:meth:`LaserPeopleDetector.update`), for the scanner that made it:
 
 1. the scanner's :class:`~fusiontrack.laser.background.BeamBackground` (ALGORITHMS.md A7 + B3) marks the
    foreground beams;
-2. the foreground beams are clustered in beam order (A8, :func:`~fusiontrack.laser.clustering.cluster_scan`)
-   only to drop isolated beams (clusters of fewer than ``min_cluster_points``; mixed pixels at edges);
+2. with ``min_cluster_points`` above 1 (the default keeps every beam: a far leg is one beam), the foreground
+   beams are clustered in beam order (A8, :func:`~fusiontrack.laser.clustering.cluster_scan`) to drop clusters
+   of fewer beams;
 3. the surviving points are moved into the world frame with the scanner's ``laser2world`` (B2).
 
 Per frame (:meth:`LaserPeopleDetector.detect`): the latest foreground points of every scanner are pooled,
@@ -411,6 +412,10 @@ def detector_for_recording(rec: Any, lasers: list[str], *, time_source: str = "h
             break
     given = dict(laser_poses or {})
     given.update({rec.sensor_of(t): given[t] for t in lasers if t in given})  # given by topic
+    unused = sorted(k for k in laser_poses or {} if k not in first and k not in lasers)
+    if unused:
+        log.warning("%s: poses given for %s, which %s no laser tracked here (tracked: %s)", rec.paths[0],
+                    ", ".join(unused), "is" if len(unused) == 1 else "are", ", ".join(lasers))
     poses: dict[str, np.ndarray] = {}
     unposed = []
     for sensor, scan in first.items():

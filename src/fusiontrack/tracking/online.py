@@ -8,9 +8,11 @@ recorded one are the same code.
 
 A step is the set of scans with one time stamp. Scanners are not synchronised, so a step is complete when a scan
 with a later stamp arrives: :meth:`OnlineLaserTracker.feed` returns the states of the step before, one scan period
-after it (40 ms at 25 Hz); :meth:`OnlineLaserTracker.close` runs the last one. Scans that arrive late (older
-than the step in progress, e.g. one scanner's messages delayed on the network) still update their scanner's
-background and foreground, and their points join the next step; steps never go back in time.
+after it (40 ms at 25 Hz); :meth:`OnlineLaserTracker.close` runs the last one. A scan that arrives late (older
+than the step in progress, e.g. one scanner's messages delayed on the network) still updates its scanner's
+background and foreground, and its points join the step in progress; steps never go back in time. (A scan older
+than its own scanner's last one is dropped by the detector, counted in its ``dropped_scans``.) The backgrounds
+are learnt online, as ``track_recording(..., background="learn")`` does.
 """
 
 from __future__ import annotations
@@ -59,7 +61,8 @@ class OnlineLaserTracker:
     Attributes
     ----------
     late_scans : int
-        Scans that arrived older than the step in progress (used, but in the next step).
+        Scans that arrived older than the step in progress (used in that step, unless older than their own
+        scanner's last scan: those the detector drops).
     """
 
     def __init__(self, scanners: Mapping[str, Any], *, tracker: str = "pf", params: Any = None,
@@ -119,6 +122,8 @@ class OnlineLaserTracker:
         """
         if self._closed:
             raise ConfigError("OnlineLaserTracker: closed; make a new one to track again")
+        if scan.sensor not in self.poses:  # before stepping: the step's states are not lost with the error
+            raise ConfigError(f"laser {scan.sensor!r}: not one of the scanners ({', '.join(sorted(self.poses))})")
         out: list[TrackState] = []
         pending = self._pending_t
         if pending is not None and scan.t_ns > pending:

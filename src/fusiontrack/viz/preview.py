@@ -8,9 +8,10 @@ One output frame per camera image when there is a camera, else one per laser sca
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -63,12 +64,13 @@ def _to_world(tree: TransformTree, frame: str, points: np.ndarray) -> np.ndarray
 def render_preview(
     recording: Sequence[Path] | Path, output: Path, *, max_frames: int | None = None, fps: float | None = None,
     height_px: int = 480, progress: Callable[[int, int], None] | None = None,
-    tracks: Sequence[TrackState] | None = None,
+    tracks: Sequence[TrackState] | None = None, laser_poses: Mapping[str, Any] | None = None,
 ) -> PreviewResult:
     """Write a preview video of ``recording`` to ``output`` (``.mp4``, ``.avi``, ``.mkv`` or ``.webm``).
 
     ``tracks`` (world frame, or the laser frame for a recording without poses) are drawn as filled
-    squares with their id and a short trail, on top of the ground truth's open circles.
+    squares with their id and a short trail, on top of the ground truth's open circles. ``laser_poses`` (laser
+    sensor or topic -> (4, 4) laser2world) place those scanners instead of ``/tf_static``, as the tracker did.
     """
     check_video_output(output)  # a folder, an unknown suffix or a missing folder: say so before reading anything
     paths = [recording] if isinstance(recording, Path | str) else list(recording)
@@ -85,11 +87,17 @@ def render_preview(
         if not laser_topics and not image_topics:
             raise RecordingError(f"{', '.join(map(str, paths))}: nothing to preview (no LaserScan or Image topic)")
         tree = _transform_tree(list(rec.messages(tf_topics))) if tf_topics else TransformTree()
+        given = {rec.sensor_of(k): np.asarray(v, np.float64) for k, v in (laser_poses or {}).items()}
+
+        def scan_world(scan: LaserScan) -> np.ndarray:
+            pose = given.get(scan.sensor)
+            pts = scan_to_points(scan)
+            return transform_points(pose, pts) if pose is not None else _to_world(tree, scan.frame_id, pts)
         # First pass over the light topics: the extent of the bird's-eye window.
         sample: list[np.ndarray] = []
         for i, msg in enumerate(rec.messages(laser_topics + truth_topics, time_source="log")):
             if isinstance(msg, LaserScan) and i % 5 == 0:
-                sample.append(_to_world(tree, msg.frame_id, scan_to_points(msg))[::3])
+                sample.append(scan_world(msg)[::3])
             elif isinstance(msg, GroundTruth) and len(msg):
                 sample.append(_to_world(tree, msg.frame_id, msg.positions_m))
             if i > 20000:
@@ -104,7 +112,7 @@ def render_preview(
             span = topics[primary].duration_s
             fps = (topics[primary].count - 1) / span if span > 0 and topics[primary].count > 1 else 10.0
         frames = _frames(stream, primary, laser_topics, tree, view, background, height_px, total, progress,
-                         {t: rec.sensor_of(t) for t in topics}, _TrackCursor(tracks or []))
+                         {t: rec.sensor_of(t) for t in topics}, _TrackCursor(tracks or []), scan_world)
         n = write_video(output, frames, fps=min(max(fps, 1.0), 60.0))
     if n == 0:
         raise RecordingError(f"{', '.join(map(str, paths))}: no frame of {primary} to draw")
@@ -134,7 +142,8 @@ class _TrackCursor:
 
 def _frames(stream: Iterator, primary: str, laser_topics: list[str], tree: TransformTree, view: BirdseyeView,
             background: np.ndarray, height_px: int, total: int, progress: Callable[[int, int], None] | None,
-            sensor_of: dict[str, str], tracks: _TrackCursor) -> Iterator[np.ndarray]:
+            sensor_of: dict[str, str], tracks: _TrackCursor,
+            scan_world: Callable[[LaserScan], np.ndarray]) -> Iterator[np.ndarray]:
     primary_sensor = sensor_of[primary]
     laser_sensors = [sensor_of[t] for t in laser_topics]
     scans: dict[str, np.ndarray] = {}
@@ -145,7 +154,7 @@ def _frames(stream: Iterator, primary: str, laser_topics: list[str], tree: Trans
     for msg in stream:
         t_first = msg.t_ns if t_first is None else t_first
         if isinstance(msg, LaserScan):
-            scans[msg.sensor] = _to_world(tree, msg.frame_id, scan_to_points(msg))
+            scans[msg.sensor] = scan_world(msg)
         elif isinstance(msg, GroundTruth):
             truth = msg
         elif isinstance(msg, Image) and msg.encoding != "mono16":
