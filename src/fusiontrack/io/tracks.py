@@ -34,7 +34,7 @@ import dataclasses
 import json
 import logging
 import math
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
@@ -178,6 +178,18 @@ def write_tracks_csv(path: str | Path, tracks: Iterable[TrackState | Track]) -> 
     return len(rows)
 
 
+def _data_rows(reader: Any, path: Path, n_fields: int) -> Iterator[tuple[int, list[str]]]:
+    """``(line, fields)`` of a CSV reader's rows after the header, blank rows skipped; a row with another number
+    of fields than the header is an error naming the line."""
+    for row in reader:
+        if not row or not "".join(row).strip():
+            continue
+        if len(row) != n_fields:
+            raise RecordingError(f"{path}, line {reader.line_num}: {len(row)} fields, expected {n_fields} like the "
+                                 f"header")
+        yield reader.line_num, row
+
+
 def read_tracks_csv(path: str | Path, sensor: str = "tracker") -> list[TrackState]:
     """Read a world-frame tracks CSV back into :class:`TrackState` records, in file order.
 
@@ -205,13 +217,7 @@ def read_tracks_csv(path: str | Path, sensor: str = "tracker") -> list[TrackStat
         if missing:
             raise RecordingError(f"{path}, line 1: header lacks {missing} (expected {what})")
         col = {c: names.index(c) for c in TRACKS_CSV_COLUMNS}
-        for row in reader:
-            if not row or not "".join(row).strip():
-                continue
-            lineno = reader.line_num
-            if len(row) != len(names):
-                raise RecordingError(f"{path}, line {lineno}: {len(row)} fields, expected {len(names)} "
-                                     f"like the header")
+        for lineno, row in _data_rows(reader, path, len(names)):
             try:
                 sensors = row[col["sensors"]].strip()
                 states.append(TrackState(
@@ -269,13 +275,7 @@ def read_ground_truth_csv(path: str | Path, sensor: str = "ground_truth") -> lis
             raise RecordingError(f"{path}, line 1: header {','.join(names)} lacks {', '.join(missing)} "
                                  f"(expected {what})")
         col = {c: names.index(c) for c in (time_col, "id", "x", "y", "class") if c in names}
-        for row in reader:
-            if not row or not "".join(row).strip():
-                continue
-            lineno = reader.line_num
-            if len(row) != len(names):
-                raise RecordingError(f"{path}, line {lineno}: {len(row)} fields, expected {len(names)} like the "
-                                     f"header")
+        for lineno, row in _data_rows(reader, path, len(names)):
             try:
                 text = row[col[time_col]].strip()
                 if time_col == "t_ns":
