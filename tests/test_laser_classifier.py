@@ -148,3 +148,43 @@ def test_the_people_walking_past_leg_tracker_s_scanner_are_all_people(shared_dat
     states, _ = track_recording(shared_data / "laser/leg_tracker_demo/demo_stationary_simple_environment.bag")
     assert len(states) >= 1000
     assert collections.Counter(s.cls for s in states)["person"] / len(states) >= 0.99
+
+
+class _ScriptedModel:
+    """Predicts ``person`` before frame ``flip`` and ``car`` from it on; remembers each call's frame."""
+
+    def __init__(self, flip: int) -> None:
+        self.flip, self.frame, self.calls = flip, 0, []
+
+    def predict(self, X):
+        self.calls.append(self.frame)
+        return np.array(["person" if self.frame < self.flip else "car"] * len(X), dtype=object)
+
+
+def test_track_classifier_predicts_settled_tracks_less_often_and_still_follows_a_change():
+    from fusiontrack.tracking.classify import TrackClassifier
+    from fusiontrack.types import Detection, TrackState
+
+    model = _ScriptedModel(flip=60)
+    clf = TrackClassifier(model, window=10, every=5, vote=3, settled_every=25)
+    arc = np.column_stack([0.05 * np.cos(np.linspace(0, np.pi, 8)), 0.05 * np.sin(np.linspace(0, np.pi, 8))])
+    classes = []
+    for k in range(1, 121):  # frame numbers as the classifier counts them (its first update is frame 0)
+        model.frame = k
+        t = k * 20_000_000
+        pos = np.array([0.02 * k, 1.0])
+        det = Detection(t, "laser", position_m=pos, features={"points_m": arc + pos})
+        (state,) = clf.update(t, [TrackState(t, "laser", 1, pos)], [det])
+        classes.append((k, state.cls))
+    # The window is full from frame 10 (k = 10 is the classifier's frame 9); predictions every 5 frames until the
+    # last 3 agree, then every 25; the change at 60 is seen at 75 and voted in at 80 (2 of the last 3).
+    assert model.calls == [11, 16, 21, 26, 51, 76, 81, 86, 101]
+    assert {c for k, c in classes if 21 <= k < 81} == {"person"}
+    assert {c for k, c in classes if k >= 81} == {"car"}
+
+
+def test_track_classifier_rejects_a_settled_cadence_off_its_step():
+    from fusiontrack.tracking.classify import TrackClassifier
+
+    with pytest.raises(ValueError, match="settled_every"):
+        TrackClassifier(_ScriptedModel(0), every=5, settled_every=12)

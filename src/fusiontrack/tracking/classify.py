@@ -6,7 +6,8 @@ correlated: its segment is then shared with another target), keeps the last ``wi
 shape rows (:func:`~fusiontrack.laser.features.segment_features`) and positions of each track, classifies
 every track with a full window every ``every`` frames (:class:`~fusiontrack.laser.classifier.ObjectClassifier`,
 one vectorised call for all tracks) and smooths the class by a majority vote over the last ``vote``
-predictions (B18 votes over 10 frames; 3 predictions 5 frames apart cover 15). The states come back with
+predictions (B18 votes over 10 frames; 3 predictions 5 frames apart cover 15). A settled track (its last
+``vote`` predictions agree) is predicted every ``settled_every`` frames only. The states come back with
 ``cls`` set; a track keeps the tracker's class until its first prediction.
 """
 
@@ -44,10 +45,15 @@ class TrackClassifier:
         Predictions in the majority vote (3); a tie keeps the class the track had.
     gate_m : float
         A track takes the nearest detection within this distance of its position (0.5 m).
+    settled_every : int
+        Frames between two predictions of a settled track (25, a multiple of ``every``; 0.5 s with two scanners
+        at 25 Hz). Predictions come on the frames where some track is due, all due tracks in one call; with every
+        track predicted each 5th frame, those frames (2.4 ms more in a crowd of 10) were a fifth of all and moved
+        the median time per scan by 0.3 ms.
     """
 
     def __init__(self, model: Any = None, *, window: int = 10, every: int = 5, vote: int = 3,
-                 gate_m: float = 0.5) -> None:
+                 gate_m: float = 0.5, settled_every: int = 25) -> None:
         from fusiontrack.laser.classifier import default_classifier
 
         if int(window) < 2:
@@ -58,6 +64,9 @@ class TrackClassifier:
             raise ValueError(f"every: expected >= 1 frame, got {every}")
         if not gate_m > 0:
             raise ValueError(f"gate_m: expected > 0 m, got {gate_m}")
+        if int(settled_every) < int(every) or int(settled_every) % int(every):
+            raise ValueError(f"settled_every: expected a multiple of every ({every}), got {settled_every}")
+        self.settled_every = int(settled_every)
         self.model = default_classifier() if model is None else model
         self.window, self.every, self.vote, self.gate_m = int(window), int(every), int(vote), float(gate_m)
         # [t_s, points, centre, shape row or None]: a segment's shape is computed once, when it is first used
@@ -68,6 +77,10 @@ class TrackClassifier:
         self._cls: dict[int, str] = {}
         self._seen: dict[int, int] = {}  # track id -> last time it was reported
         self._oldest: int | None = None  # at most the oldest time in _seen (None: not known)
+
+    def _settled(self, tid: int) -> bool:
+        votes = self._votes.get(tid)
+        return votes is not None and len(votes) == self.vote and votes.count(votes[0]) == self.vote
 
     def classes(self) -> dict[int, str]:
         """The current class of every track reported in the last 5 s."""
@@ -118,8 +131,11 @@ class TrackClassifier:
         # Every track with a full window is predicted on the same frames (one vectorised call per `every`
         # frames, not a few tracks on every frame).
         self._frame += 1
-        full = [s.track_id for s in live if len(self._rows.get(s.track_id, ())) == self.window] \
-            if self._frame % self.every == 0 else []
+        full: list[int] = []
+        if self._frame % self.every == 0:
+            all_due = self._frame % self.settled_every == 0  # settled tracks too
+            full = [s.track_id for s in live if len(self._rows.get(s.track_id, ())) == self.window
+                    and (all_due or not self._settled(s.track_id))]
         if full:
             # One call for every frame of every window: the shape of a segment is computed when it is used,
             # once per `every` frames, not each frame.
