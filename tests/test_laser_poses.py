@@ -85,3 +85,54 @@ def test_bad_given_poses_are_named(crowd):
         sensor = rec.sensor_of(topic)  # the scanner's name in the recording
     with pytest.raises(ConfigError, match=rf"laser_poses\['{sensor}'\]: expected a finite \(3, 3\)"):
         track_recording(out / "without_tf", laser_poses={topic: np.eye(2)})
+
+
+def test_convert_writes_the_pipeline_file_poses_as_tf_static(crowd, tmp_path):
+    """A recording converted with a pipeline file carries its poses: tracked without the file, it gives the tracks
+    of the recording's own /tf_static."""
+    out, scenario, lasers, bounds, corrections, _gt = crowd
+    (tmp_path / "p.toml").write_text(_toml(scenario, lasers))
+    result = subprocess.run([sys.executable, "-m", "fusiontrack", "convert", str(out / "without_tf"), "-c",
+                             str(tmp_path / "p.toml"), "-o", str(tmp_path / "posed")],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    with Recording(out / "with_tf") as rec:
+        truth = {tf.child_frame: tf for tf in rec.messages(["/tf_static"])}
+    with Recording(tmp_path / "posed") as rec:
+        written = list(rec.messages(["/tf_static"]))
+        frames = {s.frame_id for s in rec.messages(lasers)}
+    assert sorted(tf.child_frame for tf in written) == sorted(frames)  # one per scanner, the frame its scans name
+    for tf in written:
+        assert tf.parent_frame == truth[tf.child_frame].parent_frame == "world"
+        np.testing.assert_allclose(tf.translation_m[:2], truth[tf.child_frame].translation_m[:2], atol=1e-9)
+    ref, _ = track_recording(out / "with_tf", params={"lateral_m": 0.2}, area_m=bounds,
+                             clock_corrections_ns=corrections)
+    posed, _ = track_recording(tmp_path / "posed", params={"lateral_m": 0.2}, area_m=bounds,
+                               clock_corrections_ns=corrections)
+    assert len(posed) == len(ref)
+    np.testing.assert_allclose([s.position_m for s in posed], [s.position_m for s in ref], atol=1e-6)
+
+
+def test_convert_puts_the_pipeline_file_pose_in_place_of_the_recording_s_own(crowd, tmp_path):
+    out, scenario, lasers, *_ = crowd
+    laser = scenario.config.lasers[0]
+    first, *others = _toml(scenario, lasers).split("[sensors.")[1:]
+    assert first.startswith(f"{laser.name}]")
+    moved = first.replace(f"x = {laser.x_m},", f"x = {laser.x_m + 1.0},")
+    (tmp_path / "p.toml").write_text("".join("[sensors." + part for part in (moved, *others)))
+    result = subprocess.run([sys.executable, "-m", "fusiontrack", "convert", str(out / "with_tf"), "-c",
+                             str(tmp_path / "p.toml"), "-o", str(tmp_path / "moved")],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    with Recording(out / "with_tf") as rec:
+        before = list(rec.messages(["/tf_static"]))
+        frame = next(s.frame_id for s in rec.messages([lasers[0]]))
+    with Recording(tmp_path / "moved") as rec:
+        after = list(rec.messages(["/tf_static"]))
+    assert [tf.child_frame for tf in after].count(frame) == 1
+    (moved,) = [tf for tf in after if tf.child_frame == frame]
+    (own,) = [tf for tf in before if tf.child_frame == frame]
+    np.testing.assert_allclose(moved.translation_m[:2], own.translation_m[:2] + np.array([1.0, 0.0]), atol=1e-9)
+    # every other transform (the second scanner, the cameras' frames) is kept as it was
+    assert sorted(tf.child_frame for tf in after if tf.child_frame != frame) == \
+        sorted(tf.child_frame for tf in before if tf.child_frame != frame)

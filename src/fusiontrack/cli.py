@@ -238,13 +238,19 @@ def convert(
                                                     "default: every topic fusiontrack can read.")] = None,
     storage: Annotated[str, typer.Option(help="mcap or sqlite3.")] = "mcap",
     config: Annotated[Path | None, typer.Option("--config", "-c", help="Pipeline file: sensor names, "
-                                                "clock offsets, sync window.")] = None,
+                                                "clock offsets, sync window, laser poses (written as /tf_static).")
+                      ] = None,
     time_source: Annotated[str, typer.Option("--time", help="header (capture stamps) or log (recorder).")] = "header",
 ) -> None:
-    """Convert recordings into one time-synchronised rosbag2 (MCAP by default) with standard ROS types."""
+    """Convert recordings into one time-synchronised rosbag2 (MCAP by default) with standard ROS types.
+
+    A pipeline file's laser poses (``[sensors.<name>] pose``) become ``/tf_static`` transforms from ``world`` to
+    each scanner's frame, replacing the recording's own for those frames: the new recording is posed as the
+    pipeline file poses it, without the file."""
     from .io.recording import Recording
     from .io.sync import Synchronizer
     from .io.writer import RecordingWriter
+    from .types import Transform
 
     if time_source not in ("header", "log"):
         raise ConfigError(f"--time: expected 'header' or 'log', got {time_source!r}")
@@ -255,13 +261,49 @@ def convert(
         selected = [t for t in rec.topics().values() if (topic is None and t.convertible) or
                     (topic is not None and t.topic in topic)]
         total = sum(t.count for t in selected)
+        poses = _pose_transforms(rec, cfg.laser_poses(), [t.topic for t in selected], time_source)
         with RecordingWriter(output, storage=storage) as writer, progress() as bar:  # type: ignore[arg-type]
+            n = writer.write_all(poses)
             stream = _track(rec.messages(topic, time_source=time_source), bar, "converting", total)  # type: ignore[arg-type]
-            n = writer.write_all(sync(stream))
+            replaced = {tf.child_frame for tf in poses}
+            n += writer.write_all(m for m in sync(stream)
+                                  if not (isinstance(m, Transform) and m.static and m.child_frame in replaced))
     dropped = sum(sync.dropped.values())
     console.print(f"wrote {n} messages to {output}"
                   + (f" ({dropped} dropped as too far out of order)" if dropped else "")
                   + (f" ({sum(rec.skipped.values())} unreadable skipped)" if rec.skipped else ""))
+
+
+def _pose_transforms(rec: Any, laser_poses: Mapping[str, Any], topics: Sequence[str], time_source: str
+                     ) -> list[Any]:
+    """``/tf_static`` transforms ``world`` -> each posed laser's frame (its scans' ``frame_id``, else its sensor
+    name), stamped at the recording's start; poses of lasers not converted are left out with a warning."""
+    import numpy as np
+
+    from .geometry import matrix_to_quat
+    from .types import Transform
+
+    wanted = {t: T for t, T in laser_poses.items() if t in topics}
+    left = sorted(set(laser_poses) - set(wanted))
+    if left:
+        log.warning("the pipeline file poses %s, which %s not converted: no /tf_static for %s", ", ".join(left),
+                    "is" if len(left) == 1 else "are", "it" if len(left) == 1 else "them")
+    frames: dict[str, str] = {}
+    if wanted:
+        for scan in rec.messages(list(wanted), time_source=time_source):
+            frames.setdefault(scan.sensor, scan.frame_id or scan.sensor)
+            if len(frames) == len(wanted):
+                break
+    out = []
+    for topic, T in wanted.items():
+        frame = frames.get(rec.sensor_of(topic))
+        if frame is None:
+            log.warning("%s holds no scans: its pose is not written", topic)
+            continue
+        T = np.asarray(T, np.float64)
+        out.append(Transform(rec.start_ns, "/tf_static", "world", frame, T[:3, 3], matrix_to_quat(T[:3, :3]),
+                             static=True))
+    return out
 
 
 @app.command()
