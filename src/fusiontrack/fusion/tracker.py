@@ -110,11 +110,14 @@ class FusionParams:
         At most one training frame per target group every this many seconds [RECON: the camera's 15 Hz
         frames are highly correlated; one in three brings as much].
     score_map : bool
-        B16 on (score-map observation of correlated targets). On by default: on ``benchmarks/fusion.py``'s scenes
-        (crowd and groups, seeds 0-11, 30 s each, paired with the same runs without it) it cut ID switches from 117
-        to 99 and raised IDF1 from 0.880 to 0.898 and MOTA from 0.885 to 0.899 (IDF1 better in 14 runs of 24,
-        worse in 8; the largest gains on groups walking side by side), for about 0.1x laser-only's time (the maps
-        and the camera images they read). It was off while the classifiers learnt mean R, G, B (before B13's
+        B16 on (score-map observation of correlated targets). On by default. With the laser detector's
+        ``min_cluster_points`` 2 (before session 25), on ``benchmarks/fusion.py``'s scenes (crowd and groups, seeds
+        0-11, 30 s each, paired with the same runs without it) it cut ID switches from 117 to 99 and raised IDF1
+        from 0.880 to 0.898 and MOTA from 0.885 to 0.899 (IDF1 better in 14 runs of 24, worse in 8; the largest
+        gains on groups walking side by side), for about 0.1x laser-only's time (the maps and the camera images
+        they read). With ``min_cluster_points`` 1 (one-beam legs are detected, the laser loses far fewer people)
+        the same 24 runs no longer tell them apart: 48 ID switches with the maps, 49 without, IDF1 0.930 / 0.932,
+        MOTA 0.922 / 0.925 (laser-only: 44, 0.936, 0.925). It was off while the classifiers learnt mean R, G, B (before B13's
         chromaticity colour, ``FeatureParams.colour``): the map then pulled particles towards the neighbour's
         look-alike patches and cost identities. ``score_beta`` 1.0 instead of 0.5: the same switches, MOTA 0.890;
         150 ``map_patches`` instead of 300: 109 switches.
