@@ -117,10 +117,10 @@ class FusionParams:
         gains on groups walking side by side), for about 0.1x laser-only's time (the maps and the camera images
         they read). With ``min_cluster_points`` 1 (one-beam legs are detected, the laser loses far fewer people)
         the same 24 runs no longer tell them apart: 48 ID switches with the maps, 49 without, IDF1 0.930 / 0.932,
-        MOTA 0.922 / 0.925 (laser-only: 44, 0.936, 0.925). It was off while the classifiers learnt mean R, G, B (before B13's
-        chromaticity colour, ``FeatureParams.colour``): the map then pulled particles towards the neighbour's
-        look-alike patches and cost identities. ``score_beta`` 1.0 instead of 0.5: the same switches, MOTA 0.890;
-        150 ``map_patches`` instead of 300: 109 switches.
+        MOTA 0.922 / 0.925 (laser-only: 44, 0.936, 0.925). It was off while the classifiers learnt mean R, G, B
+        (before B13's chromaticity colour, ``FeatureParams.colour``): the map then pulled particles towards the
+        neighbour's look-alike patches and cost identities. Old detector: ``score_beta`` 1.0 instead of 0.5, the
+        same switches, MOTA 0.890; 150 ``map_patches`` instead of 300: 109 switches.
     score_beta : float
         Exponent of the score-map likelihood (the last annealing level's weight would be 1; the laser
         likelihood is kept, so the camera term is tempered) [RECON].
