@@ -139,3 +139,32 @@ def test_log_time_restamps_every_transform_of_a_tf_message(tmp_path):
     assert by_header.t_ns == tf.t_ns
     assert by_log.t_ns == tf.t_ns + 7_000_000
     assert records_equal(dataclasses.replace(by_log, t_ns=tf.t_ns), tf)
+
+
+@pytest.mark.parametrize("kind", ["scan", "imu"])  # the laser's fast reader and the generic one
+def test_zero_header_stamps_take_the_log_time_and_say_so(tmp_path, caplog, kind):
+    recs = sample_records(np.random.default_rng(4))
+    record = recs[0] if kind == "scan" else recs[7]
+    t0 = record.t_ns
+    with RecordingWriter(tmp_path / "r") as w:
+        for k in range(4):  # two stamped, then two a driver left unstamped
+            stamped = k < 2
+            w.write(dataclasses.replace(record, t_ns=t0 + k if stamped else 0), log_t_ns=t0 + 1000 + k)
+    with caplog.at_level("WARNING", logger="fusiontrack"), Recording(tmp_path / "r") as rec:
+        got = [m.t_ns for m in rec.messages()]
+    assert got == [t0, t0 + 1, t0 + 1002, t0 + 1003]
+    (msg,) = [r.getMessage() for r in caplog.records if "header stamps of 0" in r.getMessage()]
+    assert f"{default_topic(record)}: 2 of 4 messages" in msg
+    assert "two clocks" in msg
+
+
+def test_a_topic_never_stamped_takes_the_log_time_without_a_warning(tmp_path, caplog):
+    scan = sample_records(np.random.default_rng(5))[0]
+    with RecordingWriter(tmp_path / "r") as w:
+        for k in range(3):
+            w.write(dataclasses.replace(scan, t_ns=0), log_t_ns=scan.t_ns + k)
+    with caplog.at_level("INFO", logger="fusiontrack"), Recording(tmp_path / "r") as rec:
+        assert [m.t_ns for m in rec.messages()] == [scan.t_ns, scan.t_ns + 1, scan.t_ns + 2]
+    said = [r for r in caplog.records if "header stamps of 0" in r.getMessage()]
+    assert [r.levelname for r in said] == ["INFO"]
+    assert "3 of 3 messages" in said[0].getMessage()

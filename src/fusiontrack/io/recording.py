@@ -385,6 +385,8 @@ class Recording:
         owners = {id(c): r for r in self._readers for c in r.connections}
         skipped = self.skipped = Counter()
         reasons: dict[str, str] = {}
+        unstamped: Counter[str] = Counter()  # header stamps of 0: the log time stands in
+        read: Counter[str] = Counter()
         for conn, log_ns, raw in self._raw(conns, start_ns, stop_ns):
             reader = owners[id(conn)]
             sensor = self.sensor_of(conn.topic)
@@ -395,12 +397,23 @@ class Recording:
                 elif conn.msgtype == IMAGE and reader.is2:
                     fast = image_from_cdr_bytes(raw, sensor)  # the pixels a view of the raw bytes
                 if fast is not None:
-                    yield fast if time_source == "header" and fast.t_ns else with_time(fast, log_ns)
+                    if time_source == "header":
+                        read[conn.topic] += 1
+                        if not fast.t_ns:
+                            unstamped[conn.topic] += 1
+                            fast = with_time(fast, log_ns)
+                    else:
+                        fast = with_time(fast, log_ns)
+                    yield fast
                     continue
                 msg = reader.deserialize(raw, conn.msgtype)
                 t_ns = log_ns
                 if time_source == "header" and conn.msgtype not in HEADERLESS:
-                    t_ns = stamp_to_ns(msg.header.stamp) or log_ns
+                    read[conn.topic] += 1
+                    t_ns = stamp_to_ns(msg.header.stamp)
+                    if not t_ns:
+                        unstamped[conn.topic] += 1
+                        t_ns = log_ns
                 out = FROM_ROS[conn.msgtype](msg, t_ns, sensor, conn.topic)
             except Exception as err:  # one bad message must not end the stream
                 skipped[conn.topic] += 1
@@ -413,6 +426,15 @@ class Recording:
         if skipped:
             log.warning("skipped %d unreadable message(s): %s", sum(skipped.values()),
                         "; ".join(f"{t}: {n} (first: {reasons[t]})" for t, n in skipped.items()))
+        # Header stamps of 0: a driver that does not stamp (every message: the log time is the clock, said at info
+        # level), or stamps mixed with zeros: two clocks in one topic, which a user must hear about.
+        for level, which in ((logging.WARNING, [t for t, n in unstamped.items() if n < read[t]]),
+                             (logging.INFO, [t for t, n in unstamped.items() if n == read[t]])):
+            if which:
+                log.log(level, "header stamps of 0, the recorder's log time used instead: %s",
+                        "; ".join(f"{t}: {unstamped[t]} of {read[t]} messages"
+                                  + (" (the others are stamped: two clocks in one topic)" if level == logging.WARNING
+                                     else "") for t in which))
 
 
 def open_recording(paths: str | Path | Sequence[str | Path], **kwargs: Any) -> Recording:
