@@ -437,3 +437,28 @@ def test_real_demo_bag_three_people_walking_past(demo_scans: list[LaserScan]) ->
     assert (after == 3).mean() >= 0.7
     assert (after > 3).mean() <= 0.02
     assert (counts[None][50:] > 3).mean() >= 0.2
+
+
+def test_one_beam_clusters_are_kept_by_default_and_invalid_beams_never_are():
+    """A8 with ``min_cluster_points`` 1 (the default) keeps every valid foreground beam, a lone one too; NaN, inf and
+    zero readings never make points; with 2 the lone beam goes and the 3-beam leg stays (seed 000's A8)."""
+    rng = np.random.default_rng(RNG_SEED)
+    t = _learn_empty_room(det1 := _detector(), rng)
+    rng = np.random.default_rng(RNG_SEED)
+    _learn_empty_room(det2 := _detector(min_cluster_points=2), rng)
+    scan = _scan("laser_a", t, None, rng)
+    r = scan.ranges_m.astype(np.float64)
+    r[300:303] = 3.0  # a leg three beams wide, far in front of the wall
+    r[400] = 4.0  # a leg one beam hits
+    r[[200, 201, 202]] = [np.nan, np.inf, 0.0]  # readings that are no points
+    scan = LaserScan(t, "laser_a", "laser_a", scan.angle_min_rad, scan.angle_increment_rad, 0.05, 30.0,
+                     r.astype(np.float32))
+    for det in (det1, det2):
+        det.update(scan)
+    x, y, yaw = POSES["laser_a"]
+    ang = yaw + ANGLE_MIN + np.array([300, 301, 302, 400]) * INC
+    expected = np.column_stack([x + r[[300, 301, 302, 400]] * np.cos(ang), y + r[[300, 301, 302, 400]] * np.sin(ang)])
+    p1, _ = det1.foreground_points(t)
+    p2, _ = det2.foreground_points(t)
+    np.testing.assert_allclose(np.sort(p1, axis=0), np.sort(expected, axis=0), atol=1e-6)
+    np.testing.assert_allclose(np.sort(p2, axis=0), np.sort(expected[:3], axis=0), atol=1e-6)

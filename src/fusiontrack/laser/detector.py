@@ -270,9 +270,12 @@ class LaserPeopleDetector:
         if not fg.any():
             st.points_m = np.zeros((0, 2))
             return
-        clusters = cluster_scan(np.where(fg, r, np.nan), scan.angle_min_rad, scan.angle_increment_rad,
-                                c0_m=self.c0_m, n_min=self.min_cluster_points)
-        keep = np.flatnonzero(clusters.labels >= 0)
+        if self.min_cluster_points > 1:
+            clusters = cluster_scan(np.where(fg, r, np.nan), scan.angle_min_rad, scan.angle_increment_rad,
+                                    c0_m=self.c0_m, n_min=self.min_cluster_points)
+            keep = np.flatnonzero(clusters.labels >= 0)
+        else:  # clusters of one beam kept: A8 drops nothing but invalid beams (its cost was 0.3 ms a scan)
+            keep = np.flatnonzero(fg & np.isfinite(r) & (r > 0))
         a = scan.angle_min_rad + keep * scan.angle_increment_rad
         local = np.column_stack([r[keep] * np.cos(a), r[keep] * np.sin(a)])
         st.points_m = local @ st.rotation.T + st.translation
