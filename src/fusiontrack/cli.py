@@ -278,31 +278,22 @@ def _pose_transforms(rec: Any, laser_poses: Mapping[str, Any], topics: Sequence[
                      ) -> list[Any]:
     """``/tf_static`` transforms ``world`` -> each posed laser's frame (its scans' ``frame_id``, else its sensor
     name), stamped at the recording's start; poses of lasers not converted are left out with a warning."""
-    import numpy as np
-
-    from .geometry import matrix_to_quat
-    from .types import Transform
+    from .geometry import static_transform
+    from .laser.detector import first_scans
 
     wanted = {t: T for t, T in laser_poses.items() if t in topics}
     left = sorted(set(laser_poses) - set(wanted))
     if left:
         log.warning("the pipeline file poses %s, which %s not converted: no /tf_static for %s", ", ".join(left),
                     "is" if len(left) == 1 else "are", "it" if len(left) == 1 else "them")
-    frames: dict[str, str] = {}
-    if wanted:
-        for scan in rec.messages(list(wanted), time_source=time_source):
-            frames.setdefault(scan.sensor, scan.frame_id or scan.sensor)
-            if len(frames) == len(wanted):
-                break
+    first = first_scans(rec, list(wanted), time_source)
     out = []
     for topic, T in wanted.items():
-        frame = frames.get(rec.sensor_of(topic))
-        if frame is None:
+        scan = first.get(rec.sensor_of(topic))
+        if scan is None:
             log.warning("%s holds no scans: its pose is not written", topic)
             continue
-        T = np.asarray(T, np.float64)
-        out.append(Transform(rec.start_ns, "/tf_static", "world", frame, T[:3, 3], matrix_to_quat(T[:3, :3]),
-                             static=True))
+        out.append(static_transform(rec.start_ns, "world", scan.frame_id or scan.sensor, T))
     return out
 
 

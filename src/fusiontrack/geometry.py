@@ -26,7 +26,7 @@ __all__ = [
     "fit_projection_matrix", "fit_rigid_2d", "invert_transform", "make_transform", "matrix_to_quat",
     "person_box_from_matrix", "pose2d_to_matrix", "project_with_matrix", "quat_to_matrix",
     "ranges_to_points", "reprojection_rms", "rpy_to_matrix", "scan_to_points", "scan_to_world",
-    "transform_points", "wrap_angle", "yaw_to_matrix",
+    "static_transform", "transform_points", "wrap_angle", "yaw_to_matrix",
 ]
 
 # Columns are the optical axes (x right, y down, z forward) in a level body frame (x forward, y left, z up).
@@ -59,6 +59,12 @@ def quat_to_matrix(xyzw: Any) -> np.ndarray:
 def matrix_to_quat(R: Any) -> np.ndarray:
     """Quaternion ``(x, y, z, w)``, ``w >= 0``, from a rotation: (3, 3) -> (4,), (n, 3, 3) -> (n, 4)."""
     return Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_quat(canonical=True)
+
+
+def static_transform(t_ns: int, parent: str, child: str, child2parent: Any) -> Transform:
+    """The ``/tf_static`` record of a ``(4, 4)`` ``child2parent`` (the pose of ``child`` in ``parent``)."""
+    T = np.asarray(child2parent, dtype=np.float64)
+    return Transform(t_ns, "/tf_static", parent, child, T[:3, 3], matrix_to_quat(T[:3, :3]), True)
 
 
 def rpy_to_matrix(roll_rad: float, pitch_rad: float, yaw_rad: float) -> np.ndarray:

@@ -34,7 +34,7 @@ from __future__ import annotations
 import inspect
 import logging
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -366,6 +366,18 @@ def check_detector_params(params: Mapping[str, Any] | None, source: str = "laser
     return out
 
 
+def first_scans(rec: Any, lasers: Sequence[str], time_source: str = "header") -> dict[str, Any]:
+    """sensor -> the first :class:`~fusiontrack.types.LaserScan` of each of the laser topics of an open recording
+    (their frame ids and geometries); a topic without scans has no entry."""
+    first: dict[str, Any] = {}
+    if lasers:
+        for scan in rec.messages(list(lasers), time_source=time_source):
+            first.setdefault(scan.sensor, scan)
+            if len(first) == len(lasers):
+                break
+    return first
+
+
 def detector_for_recording(rec: Any, lasers: list[str], *, time_source: str = "header", world_frame: str = "world",
                            background: str = "learn", detector_params: Mapping[str, Any] | None = None,
                            laser_poses: Mapping[str, Any] | None = None,
@@ -408,11 +420,7 @@ def detector_for_recording(rec: Any, lasers: list[str], *, time_source: str = "h
                 tree.add_record(tf)
             except ConfigError as err:
                 log.warning("tf_static: %s", err)
-    first: dict[str, Any] = {}
-    for scan in rec.messages(lasers, time_source=time_source):  # one scan per topic: frame ids
-        first.setdefault(scan.sensor, scan)
-        if len(first) == len(lasers):
-            break
+    first = first_scans(rec, lasers, time_source)
     given = dict(laser_poses or {})
     given.update({rec.sensor_of(t): given[t] for t in lasers if t in given})  # given by topic
     unused = sorted(k for k in laser_poses or {} if k not in first and k not in lasers)

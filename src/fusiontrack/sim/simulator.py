@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError
-from ..geometry import make_transform, matrix_to_quat, yaw_to_matrix
+from ..geometry import make_transform, static_transform, yaw_to_matrix
 from ..io.tracks import write_jsonl
 from ..io.writer import RecordingWriter
 from ..types import Event, GroundTruth, Image, Situation, Transform
@@ -106,11 +106,6 @@ def schedule(timing: Timing, duration_s: float, latency_s: float, rng: np.random
     return [Capture(int(a), int(b), int(c), bool(d)) for a, b, c, d in zip(t_ns, stamp_ns, log_ns, lost, strict=True)]
 
 
-def _pose_transform(t_ns: int, parent: str, child: str, child2parent: np.ndarray) -> Transform:
-    return Transform(t_ns, "/tf_static", parent, child, child2parent[:3, 3], matrix_to_quat(child2parent[:3, :3]),
-                     True)
-
-
 def _laser2world(spec: Any) -> np.ndarray:
     return make_transform(yaw_to_matrix(spec.yaw_rad), [spec.x_m, spec.y_m, spec.height_m])
 
@@ -172,11 +167,11 @@ class Simulation:
         out = []
         for laser in self.lasers:
             T = _laser2world(laser.spec)
-            out += [_pose_transform(T0_NS, "world", laser.spec.name, T),
-                    _pose_transform(T0_NS, "world", laser.spec.name + "_calibrated", T)]
+            out += [static_transform(T0_NS, "world", laser.spec.name, T),
+                    static_transform(T0_NS, "world", laser.spec.name + "_calibrated", T)]
         for cam in self.cameras:
-            out += [_pose_transform(T0_NS, "world", cam.spec.name, cam.true_camera.cam2world),
-                    _pose_transform(T0_NS, "world", cam.spec.name + "_calibrated", cam.calibrated_camera.cam2world)]
+            out += [static_transform(T0_NS, "world", cam.spec.name, cam.true_camera.cam2world),
+                    static_transform(T0_NS, "world", cam.spec.name + "_calibrated", cam.calibrated_camera.cam2world)]
         return out
 
     def run(self, output: str | Path, progress: Callable[[float], None] | None = None) -> SimulationResult:
