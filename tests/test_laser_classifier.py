@@ -104,7 +104,7 @@ def unseen_scenes(tmp_path_factory):
     """People and vehicles from simulator seeds the shipped model was not trained on (it used 0, 1; 2 held out)."""
     out = tmp_path_factory.mktemp("unseen")
     paths = []
-    for name, seconds, extra in (("crowd", 20, {}), ("road", 50, {"agents.bicycle_fraction": 0.5})):
+    for name, seconds, extra in (("crowd", 30, {}), ("road", 50, {"agents.bicycle_fraction": 0.5})):
         sc = load_scenario(name).with_overrides(seconds=seconds, seed=7, settings={"cameras": [], **extra})
         simulate(sc, out / name)
         paths.append(out / name)
@@ -130,13 +130,17 @@ def test_shipped_model_calls_real_walking_legs_people(shared_data):
 
 
 def test_tracker_gives_tracks_their_class(unseen_scenes):
+    # The crowd holds people only. A track sees the detector's two-feet segments, which at times hold a neighbour's
+    # foot or a second person with no track yet, and are half a metre wide: trained on people's own points alone,
+    # the model called 340 of these 12 713 states car (2.7 %; a person walking beside another lost the person
+    # class for seconds, and with it a place in person-only scores and lists).
     from fusiontrack.tracking.tracker import track_recording
 
     crowd = unseen_scenes[0]
     bounds = Simulation(load_scenario("crowd").with_overrides(settings={"cameras": []})).world.bounds_m
     states, _ = track_recording(crowd, params={"lateral_m": 0.2}, area_m=bounds)
-    own = [s for s in states if s.situation not in ("merged", "correlated")]
-    assert np.mean([s.cls == "person" for s in own]) >= 0.95
+    assert len(states) > 10_000
+    assert np.mean([s.cls != "person" for s in states]) <= 0.005, collections.Counter(s.cls for s in states)
 
 
 def test_the_people_walking_past_leg_tracker_s_scanner_are_all_people(shared_data):
