@@ -13,7 +13,7 @@ import pytest
 
 from fusiontrack.errors import ConfigError
 from fusiontrack.laser.classifier import CLASSES, ObjectClassifier, default_classifier
-from fusiontrack.laser.features import WINDOW_FEATURES
+from fusiontrack.laser.features import GEOMETRIC_FEATURES, WINDOW_FEATURES
 from fusiontrack.laser.training import leg_windows, simulated_windows
 from fusiontrack.sim.scenario import load_scenario
 from fusiontrack.sim.simulator import Simulation, simulate
@@ -192,3 +192,18 @@ def test_track_classifier_rejects_a_settled_cadence_off_its_step():
 
     with pytest.raises(ValueError, match="settled_every"):
         TrackClassifier(_ScriptedModel(0), every=5, settled_every=12)
+
+
+def test_training_chains_link_segments_one_to_one():
+    # Two segments of one frame never continue the same chain (their windows would hold two objects at one time):
+    # the closest pair links first, the other segment takes the next free chain within reach, or starts one.
+    from fusiontrack.laser.training import _link
+
+    rows = np.zeros((2, len(GEOMETRIC_FEATURES)))
+    frames = [(0, rows, np.array([[0.0, 0.0], [0.3, 0.0]])),
+              (1, rows, np.array([[0.1, 0.0], [0.15, 0.0]])),  # both nearest to the first chain
+              (2, rows, np.array([[0.12, 0.0], [3.0, 0.0]])),  # one far away: a new chain
+              (3, rows[:0], np.zeros((0, 2))),  # nothing seen: every chain ends
+              (4, rows[:1], np.array([[0.12, 0.0]]))]
+    keys = [(t, key) for (_, key), t, *_ in _link(frames, "person", 0.5, "src")]
+    assert keys == [(0, 0), (0, 1), (1, 0), (1, 1), (2, 0), (2, 2), (4, 3)]
