@@ -303,9 +303,14 @@ class LaserPeopleDetector:
     def segments(self, t_ns: int) -> tuple[np.ndarray, Segments]:
         """Array form of :meth:`detect`: the pooled points ``(n, 2)`` and their :class:`Segments`."""
         points, _ = self.foreground_points(t_ns)
-        return points, mean_shift_segments(points, self.bandwidth_m, n_min=self.min_segment_points,
-                                           merge_m=self.merge_m, pair_feet_m=self.pair_feet_m,
-                                           foot_radius_m=self.foot_radius_m, d_one_foot_m=self.d_one_foot_m)
+        return points, self.segment(points)
+
+    def segment(self, points_m: np.ndarray) -> Segments:
+        """The two-feet segments (B4, B5) of pooled foreground points ``(n, 2)``, with this detector's
+        parameters (:meth:`segments` of :meth:`foreground_points`)."""
+        return mean_shift_segments(points_m, self.bandwidth_m, n_min=self.min_segment_points, merge_m=self.merge_m,
+                                   pair_feet_m=self.pair_feet_m, foot_radius_m=self.foot_radius_m,
+                                   d_one_foot_m=self.d_one_foot_m)
 
     def detect(self, t_ns: int) -> list[Detection]:
         """Two-feet segments at ``t_ns`` as detections (world frame), one per segment.

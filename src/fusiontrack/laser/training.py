@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from fusiontrack.laser.clustering import Segments
 from fusiontrack.laser.features import GEOMETRIC_FEATURES, segment_features, window_features
 from fusiontrack.types import ObjectClass
 
@@ -94,11 +95,10 @@ def windows_from_observations(obs: Sequence[tuple[Any, int, str, np.ndarray, np.
 
 def _frames(path: str | Path, *, background: str = "learn", time_source: str = "header",
             detector_params: dict[str, Any] | None = None,
-            ) -> Iterator[tuple[int, np.ndarray, Callable[[], np.ndarray]]]:
+            ) -> Iterator[tuple[int, np.ndarray, Callable[[], Segments]]]:
     """(t_ns, pooled foreground points (n, 2) in the world, their segments) per scan time, as the tracker's
-    detector sees them. The segments: a function giving the label of each point in the detector's two-feet
-    segments (B4; ``-1`` for a dropped point), valid until the next frame is asked for (the mean-shift runs only
-    when called)."""
+    detector sees them. The segments: a function giving the detector's two-feet segments of those points (B4,
+    :class:`~fusiontrack.laser.clustering.Segments`; the mean-shift runs only when it is called)."""
     from fusiontrack.io.recording import LASERSCAN, Recording
     from fusiontrack.io.sync import synchronize
     from fusiontrack.laser.detector import detector_for_recording
@@ -108,8 +108,9 @@ def _frames(path: str | Path, *, background: str = "learn", time_source: str = "
         detector, _ = detector_for_recording(rec, lasers, time_source=time_source, background=background,
                                              detector_params=detector_params)
 
-        def frame(t_ns: int) -> tuple[int, np.ndarray, Callable[[], np.ndarray]]:
-            return t_ns, detector.foreground_points(t_ns)[0], lambda: detector.segments(t_ns)[1].labels
+        def frame(t_ns: int) -> tuple[int, np.ndarray, Callable[[], Segments]]:
+            points = detector.foreground_points(t_ns)[0]
+            return t_ns, points, lambda: detector.segment(points)
 
         pending: int | None = None
         for scan in synchronize(rec.messages(lasers, time_source=time_source)):
@@ -165,21 +166,20 @@ def simulated_windows(path: str | Path, *, window: int = 10, stride: int = 5, se
     return windows_from_observations(obs, window=window, stride=stride)
 
 
-def _people_segments(points_m: np.ndarray, seg: np.ndarray, owned: np.ndarray, persons: np.ndarray,
+def _people_segments(points_m: np.ndarray, segs: Segments, owned: np.ndarray, persons: np.ndarray,
                      purity: float) -> tuple[np.ndarray, np.ndarray]:
-    """Shape rows and centroids of the segments (labels ``seg``, 3 points or more) at least ``purity`` of whose
-    points are people's (``persons``), the others all belonging to some object (``owned``) or to none."""
-    k = int(seg.max()) + 1 if seg.size else 0
+    """Shape rows and centres of the segments ``segs`` of ``points_m`` (3 points or more) at least ``purity`` of
+    whose points are people's (``persons``), the others all belonging to some object (``owned``) or to none."""
+    k = len(segs)
     if k == 0:
         return np.zeros((0, len(GEOMETRIC_FEATURES))), np.zeros((0, 2))
+    seg = segs.labels
     on = seg >= 0
-    n = np.bincount(seg[on], minlength=k)
+    n = segs.n_points
     of_people = np.bincount(seg[on], weights=persons[on], minlength=k)
     of_others = np.bincount(seg[on], weights=owned[on] & ~persons[on], minlength=k)
     keep = np.flatnonzero((n >= 3) & (of_people >= purity * n) & (of_others == 0))
-    feats = segment_features(points_m, seg, k)[keep]
-    cents = np.stack([np.bincount(seg[on], weights=points_m[on, c], minlength=k) for c in (0, 1)], axis=1)
-    return feats, cents[keep] / n[keep, None]
+    return segment_features(points_m, seg, k)[keep], segs.centres_m[keep]
 
 
 def label_points(points_m: np.ndarray, gt: Any) -> np.ndarray:
