@@ -59,7 +59,7 @@ import numpy as np
 
 from fusiontrack.errors import ConfigError
 from fusiontrack.laser.background import BeamBackground, InitMethod, all_initialised, keep_primed_backgrounds
-from fusiontrack.laser.clustering import a8_runs
+from fusiontrack.laser.clustering import segment_scan
 from fusiontrack.laser.detector import planar_pose
 from fusiontrack.tracking import kalman
 from fusiontrack.tracking.association import hungarian
@@ -193,73 +193,6 @@ def classify_extents(extent_m: Any, *, people: bool = False) -> np.ndarray:
 # --------------------------------------------------------------------------------------------------
 # Segmentation: A8, with the breakpoint widened at grazing incidence
 # --------------------------------------------------------------------------------------------------
-
-
-def segment_scan(ranges_m: Any, angle_min_rad: float, angle_increment_rad: float, *, c0_m: float = 0.5,
-                 n_min: int = 3, grazing_deg: float | None = 10.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Vehicle clusters of one scan: A8 breakpoints (``C0 = 0.5 m``), joined across sparse grazing sides.
-
-    :func:`~fusiontrack.laser.clustering.cluster_scan` (A8) splits where adjacent points are farther apart than
-    ``C0 + C1 min(r)``. Along a vehicle side seen at a grazing angle ``λ`` the returns are ``~ r Δθ / sin λ``
-    apart (≈ 1.9 m at 50 m and 13°), so a far vehicle would fall apart into single points. Two A8 clusters
-    are therefore joined when they are adjacent beams (no invalid or background beam between them) and their
-    facing points are within the adaptive breakpoint of Borges & Aldon (2004), ``r sin Δθ / sin(λ - Δθ)``,
-    with ``λ = grazing_deg``. A gap between two vehicles shows a background beam, so it is not joined.
-
-    Parameters
-    ----------
-    ranges_m : (n_beams,) float
-        Ranges of the beams to segment, ``NaN`` elsewhere.
-    angle_min_rad, angle_increment_rad : float
-    c0_m : float
-        A8 constant (D4: 0.5 m).
-    n_min : int
-        Clusters with fewer points (after joining) are dropped.
-    grazing_deg : float or None
-        Shallowest incidence angle still joined, degrees (10°); ``None``: A8 alone.
-
-    Returns
-    -------
-    labels : (n_beams,) int64
-        Cluster of each beam, ``-1`` for none; clusters are beam-order runs numbered in beam order.
-    n_points : (k,) int64
-    mean_range_m : (k,) float64
-    """
-    if grazing_deg is not None and not (0.0 < float(grazing_deg) < 90.0):
-        raise ValueError(f"grazing_deg: expected an angle in (0, 90) degrees or None, got {grazing_deg}")
-    if isinstance(n_min, bool) or not isinstance(n_min, int | np.integer) or n_min < 1:
-        raise ValueError(f"n_min: expected an integer >= 1, got {n_min!r}")
-    c0 = float(c0_m)
-    if not (math.isfinite(c0) and c0 >= 0):
-        raise ValueError(f"c0_m: expected a finite value >= 0, got {c0}")
-    if not math.isfinite(float(angle_min_rad)):
-        raise ValueError(f"angle_min_rad: expected a finite angle, got {angle_min_rad}")
-    if not (math.isfinite(float(angle_increment_rad)) and angle_increment_rad != 0):
-        raise ValueError(f"angle_increment_rad: expected a finite non-zero angle, got {angle_increment_rad}")
-    r = np.asarray(ranges_m, dtype=np.float64).reshape(-1)
-    # A8 runs as cluster_scan(..., n_min=1) finds them (without the centroids, bearings and widths it also computes)
-    beams, rv, first, run = a8_runs(r, angle_increment_rad, c0)
-    n_points = np.bincount(run).astype(np.int64)
-    k = n_points.size
-    start = beams[first].astype(np.int64)
-    stop = start + n_points
-    mean_range = np.bincount(run, rv, k) / np.maximum(n_points, 1).astype(np.float64)
-    # joins across grazing sides
-    join = np.zeros(k, bool)  # join[j]: cluster j continues cluster j - 1
-    inc = abs(float(angle_increment_rad))
-    if k > 1 and grazing_deg is not None and math.radians(float(grazing_deg)) > inc:
-        ra, rb = r[stop[:-1] - 1], r[start[1:]]
-        gap2 = ra * ra + rb * rb - 2.0 * math.cos(inc) * ra * rb
-        d_max = np.minimum(ra, rb) * math.sin(inc) / math.sin(math.radians(float(grazing_deg)) - inc)
-        join[1:] = (start[1:] == stop[:-1]) & (gap2 <= d_max * d_max)
-    merged = (~join).cumsum() - 1  # new id of each A8 cluster
-    size = np.bincount(merged, weights=n_points, minlength=int(merged[-1]) + 1 if k else 0).astype(np.int64)
-    rsum = np.bincount(merged, weights=mean_range * n_points, minlength=size.size)
-    keep = size >= n_min
-    new_id = np.where(keep, keep.cumsum() - 1, -1)
-    labels = np.full(r.size, -1, np.int64)
-    labels[beams] = new_id[merged[run]]
-    return labels, size[keep], rsum[keep] / np.maximum(size[keep], 1)
 
 
 # --------------------------------------------------------------------------------------------------
