@@ -27,13 +27,15 @@ PERIOD_NS = 100_000_000  # 10 Hz
 
 
 def _scan(name: str, t_ns: int, legs: np.ndarray | None, rng: np.random.Generator, noise_m: float = 0.01,
-          n_beams: int = N_BEAMS) -> LaserScan:
-    """A 270° scan of the room (and of the leg circles ``legs`` (n, 2)) from scanner ``name``."""
+          n_beams: int = N_BEAMS, sides: np.ndarray | None = None) -> LaserScan:
+    """A 270° scan of the room (and of the leg circles ``legs`` (n, 2) and the segments ``sides`` (m, 2, 2))
+    from scanner ``name``."""
     x, y, yaw = POSES[name]
     inc = np.deg2rad(270.0) / n_beams
     ang = yaw + ANGLE_MIN + np.arange(n_beams) * inc
     circles = np.zeros((0, 3)) if legs is None else np.column_stack([legs, np.full(len(legs), LEG_RADIUS_M)])
-    r, _ = cast_rays([x, y], np.column_stack([np.cos(ang), np.sin(ang)]), WALLS, circles)
+    walls = WALLS if sides is None else np.concatenate([WALLS, sides])
+    r, _ = cast_rays([x, y], np.column_stack([np.cos(ang), np.sin(ang)]), walls, circles)
     r = r + rng.normal(0.0, noise_m, n_beams)
     return LaserScan(t_ns, name, name, ANGLE_MIN, inc, 0.05, 30.0, r.astype(np.float32))
 
@@ -243,6 +245,109 @@ def test_priming_a_scanner_with_too_few_scans_leaves_it_to_learn_online() -> Non
                                   primed.background("laser_b").background_m)
     np.testing.assert_array_equal(online.background("laser_a").background_m,
                                   primed.background("laser_a").background_m)
+
+
+def _box(centre: tuple[float, float], length_m: float, width_m: float, heading_rad: float) -> np.ndarray:
+    """The four sides (4, 2, 2) of a ``length_m`` x ``width_m`` rectangle (a car seen from above)."""
+    c, s = np.cos(heading_rad), np.sin(heading_rad)
+    half = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]]) * [length_m / 2, width_m / 2]
+    corners = np.asarray(centre) + half @ np.array([[c, s], [-s, c]])
+    return np.stack([corners, np.roll(corners, -1, axis=0)], axis=1)
+
+
+def _line(centre: tuple[float, float], length_m: float, heading_rad: float) -> np.ndarray:
+    """A ``length_m`` segment (1, 2, 2): a bicycle seen from the side (B18's simulated bicycle is a 1.7 m line)."""
+    d = np.array([np.cos(heading_rad), np.sin(heading_rad)]) * length_m / 2
+    return np.array([[np.asarray(centre) - d, np.asarray(centre) + d]])
+
+
+def _vehicles_and_people(rigid_min_m: float | None = 1.0) -> tuple[list[Detection], np.ndarray]:
+    rng = np.random.default_rng(RNG_SEED)
+    det = _detector(rigid_min_m=rigid_min_m)
+    t = _learn_empty_room(det, rng)
+    # two people side by side (centres 0.45 m apart) and one alone; a bicycle; a car both scanners see
+    centres = np.array([[3.0, 4.0], [3.0, 4.45], [9.0, 8.0]])
+    legs = np.concatenate([centres + np.array([0.12, 0.0]), centres - np.array([0.12, 0.0])])
+    sides = np.concatenate([_line((4.0, 8.0), 1.7, 0.3), _box((8.0, 3.5), 4.5, 1.8, 0.2)])
+    for name in POSES:
+        det.update(_scan(name, t, legs, rng, sides=sides))
+    return det.detect(t), centres
+
+
+def test_a_bicycle_and_a_car_are_one_rigid_detection_each_and_people_stay_segments() -> None:
+    dets, centres = _vehicles_and_people()
+    rigid = [d for d in dets if bool(d.features["rigid"])]
+    people = [d for d in dets if not bool(d.features["rigid"])]
+    assert len(rigid) == 2
+    pos = np.array([d.position_m for d in rigid])
+    # the bicycle's side; the car's four sides (two from each scanner, joined at the corners): centroid = centre
+    assert np.linalg.norm(pos - [4.0, 8.0], axis=1).min() < 0.1
+    assert np.linalg.norm(pos - [8.0, 3.5], axis=1).min() < 0.3
+    car = rigid[int(np.argmin(np.linalg.norm(pos - [8.0, 3.5], axis=1)))]
+    extent = np.ptp(car.features["points_m"] @ np.array([np.cos(0.2), np.sin(0.2)]))
+    assert extent > 4.0  # whole, not the side one scanner sees
+    # every person is still a two-feet segment, and nothing of the vehicles leaked into those
+    assert len(people) == len(centres)
+    assert _match(people, centres).max() < 0.25
+
+
+def test_without_rigid_objects_a_car_is_cut_into_walker_sized_pieces() -> None:
+    dets, centres = _vehicles_and_people(rigid_min_m=None)
+    assert not any(bool(d.features["rigid"]) for d in dets)
+    near_car = [d for d in dets if np.linalg.norm(d.position_m - [8.0, 3.5]) < 3.0]
+    assert len(near_car) >= 3  # the failure the rigid objects fix: one car, several "people"
+    assert _match(dets, centres).max() < 0.25
+
+
+def test_a_rigid_object_seen_shorter_stays_rigid_and_a_short_new_one_is_not() -> None:
+    def rigid_after(lengths: list[float]) -> bool:
+        rng = np.random.default_rng(RNG_SEED)
+        det = _detector()
+        t = _learn_empty_room(det, rng)
+        for k, length in enumerate(lengths):
+            for name in POSES:
+                # the line lies across both scanners' views (heading 2.3 rad)
+                det.update(_scan(name, t + k * PERIOD_NS, None, rng, sides=_line((6.0, 5.0), length, 2.3)))
+            dets = det.detect(t + k * PERIOD_NS)
+        return any(bool(d.features["rigid"]) for d in dets)
+
+    assert rigid_after([1.2])
+    assert not rigid_after([0.8])  # below rigid_min_m (1 m): walker-sized
+    assert rigid_after([1.2, 0.8])  # hysteresis: above rigid_keep_m (0.6 m) next to last scan's rigid points
+    assert not rigid_after([1.2, 0.4])
+
+
+def test_legs_strung_together_in_depth_are_not_a_rigid_object() -> None:
+    # Legs of people one behind the other, 15-16 m away, at adjacent bearings: each half a metre deeper than the
+    # last, within the grazing joins' reach there (0.59 m), so the beam-order cluster is 1 m long. A vehicle's side
+    # seen at the same place is one piece; the legs have gaps of half the cluster's length.
+    inc = np.deg2rad(0.375)
+
+    def objects(fg: np.ndarray, **kwargs: float) -> list[tuple[bool, int]]:
+        det = LaserPeopleDetector({"s": np.eye(3)}, **kwargs)
+        bg = np.full(480, 25.0)
+        for k in range(60):
+            det.update(LaserScan(k * PERIOD_NS, "s", "s", -np.pi / 2, inc, 0.05, 40.0, bg.astype(np.float32)))
+        r = bg.copy()
+        r[200:200 + fg.size] = fg
+        det.update(LaserScan(60 * PERIOD_NS, "s", "s", -np.pi / 2, inc, 0.05, 40.0, r.astype(np.float32)))
+        return [(bool(d.features["rigid"]), len(d.features["points_m"])) for d in det.detect(60 * PERIOD_NS)]
+
+    legs = np.repeat([15.0, 15.5, 16.0], 4)
+    assert objects(legs) == [(False, 4)] * 3
+    assert objects(legs, rigid_max_gap=1.0) == [(True, 12)]  # what the gap test prevents
+    assert objects(np.linspace(15.0, 16.2, 40)) == [(True, 40)]
+
+
+def test_rigid_object_parameters_are_checked() -> None:
+    from fusiontrack.laser.detector import check_detector_params
+
+    assert check_detector_params({"rigid_min_m": float("inf")}) == {"rigid_min_m": float("inf")}
+    assert _detector(rigid_min_m=float("inf")).rigid_min_m is None  # a pipeline file's "off"
+    for key, value in (("rigid_min_m", 0.0), ("rigid_min_m", "1"), ("rigid_keep_m", -1.0), ("rigid_join_m", np.nan),
+                       ("rigid_grazing_deg", 95.0)):
+        with pytest.raises(ConfigError, match=key):
+            check_detector_params({key: value}, "pipeline.toml [laser]")
 
 
 # ---- bad sensor data --------------------------------------------------------------------------------------

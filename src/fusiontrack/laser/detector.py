@@ -7,11 +7,17 @@ Per scan (:meth:`LaserPeopleDetector.update`), for the scanner that made it:
 2. with ``min_cluster_points`` above 1 (the default keeps every beam: a far leg is one beam), the foreground
    beams are clustered in beam order (A8, :func:`~fusiontrack.laser.clustering.cluster_scan`) to drop clusters
    of fewer beams;
-3. the surviving points are moved into the world frame with the scanner's ``laser2world`` (B2).
+3. the surviving points are moved into the world frame with the scanner's ``laser2world`` (B2);
+4. **rigid objects**: the foreground beams are also clustered in beam order with A8 joined across grazing sides
+   (:func:`~fusiontrack.laser.clustering.segment_scan`); a cluster whose first and last points are at least
+   ``rigid_min_m`` (1 m) apart is the side of a bicycle or a car, not a person (a person's beam-order clusters
+   are legs, a few centimetres to half a metre across), and its points are marked rigid.
 
-Per frame (:meth:`LaserPeopleDetector.detect`): the latest foreground points of every scanner are pooled,
-segmented by mean-shift (B4) and split into feet (B5), and each segment becomes one
-:class:`~fusiontrack.types.Detection`.
+Per frame (:meth:`LaserPeopleDetector.detect`): the latest foreground points of every scanner are pooled. The rigid
+clusters of all scanners within ``rigid_join_m`` of each other, and the loose points within that distance of them,
+form one rigid object each: a :class:`~fusiontrack.types.Detection` with feature ``"rigid"`` (B18's bicycles and
+cars, tracked with constant velocity). The other points are segmented by mean-shift (B4) and split into feet (B5),
+and each segment becomes one detection. Without step 4 a car was cut into 0.4 m pieces, each tracked as a walker.
 
 Timing assumptions
 ------------------
@@ -31,17 +37,22 @@ Timing assumptions
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import logging
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
+import cv2
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from fusiontrack.errors import ConfigError
 from fusiontrack.laser.background import BeamBackground, InitMethod, all_initialised, keep_primed_backgrounds
-from fusiontrack.laser.clustering import Segments, cluster_scan, mean_shift_segments
+from fusiontrack.laser.clustering import Segments, cluster_scan, mean_shift_segments, segment_scan
 from fusiontrack.types import Detection, LaserScan
 
 __all__ = ["LaserPeopleDetector", "check_detector_params", "detector_for_recording", "planar_pose"]
@@ -71,7 +82,7 @@ def planar_pose(laser2world: Any, name: str = "laser2world") -> tuple[np.ndarray
 class _Scanner:
     """Mutable per-scanner state (the detector's, not shared)."""
 
-    __slots__ = ("background", "geometry", "points_m", "primed_ns", "rotation", "t_ns", "translation")
+    __slots__ = ("background", "geometry", "points_m", "primed_ns", "rigid", "rotation", "t_ns", "translation")
 
     def __init__(self, rotation: np.ndarray, translation: np.ndarray) -> None:
         self.rotation = rotation
@@ -80,6 +91,7 @@ class _Scanner:
         self.geometry: tuple[int, float, float] | None = None
         self.t_ns: int | None = None
         self.points_m = np.zeros((0, 2))
+        self.rigid = np.zeros(0, np.int64)  # rigid cluster of each point in this scan, -1 for none
         self.primed_ns: int | None = None  # scans up to this time taught the background already (prime)
 
 
@@ -116,6 +128,31 @@ class LaserPeopleDetector:
         B5: feet closer than this (0.12 m) make a one-foot segment.
     min_sigma_m : float
         The detection covariance is ``min_sigma_m**2 I`` plus the sample covariance of the segment's points.
+    rigid_min_m : float or None
+        A beam-order cluster (A8 with ``c0_m``, joined across sides seen at down to ``rigid_grazing_deg`` = 10
+        degrees) whose first and last points are at least this far apart (1.0 m) and that is one piece (below) is
+        rigid: part of a bicycle or a car, kept whole instead of mean-shifted. ``None`` or ``inf`` (in a pipeline
+        file): none is (pure B4). A person's beam-order clusters are legs, at most about half a metre across.
+    rigid_grazing_deg : float
+        See ``rigid_min_m``.
+    rigid_max_gap : float
+        One piece: no gap between consecutive points wider than this fraction (0.3) of the first-to-last distance.
+        Two legs of different people at nearly the same bearing, half a metre apart in depth, pass the grazing
+        joins, and a vehicle's side does not have such a gap. Measured on simulated recordings (30 s crowd seeds
+        0-11 and groups 0-3; 60 s road seed 7 with half bicycles; one count per scanner and scan): clusters of
+        people at least 1 m long went from 53 to 2, the cars' points in such clusters from 704 000 to 682 000,
+        the bicycles' from 22 700 to 22 100. Without it the rigid objects cost paired 30 s crowd runs (laser only,
+        seeds 0-11) MOTA 0.923 -> 0.916 and ID switches 33 -> 40; with it those runs are the same as with no rigid
+        objects at all, and of 12 groups runs one differs (3 ID switches instead of 2).
+    rigid_keep_m : float
+        Hysteresis: a cluster in one piece at least this long (0.6 m) that comes within ``rigid_join_m`` of the
+        scanner's rigid points of its previous scan stays rigid. An object seen at about ``rigid_min_m`` (a bicycle
+        end-on, clutter seen from a moving robot) otherwise flickers between a rigid object and walker-sized
+        pieces, and each piece starts a walking track. On the outdoor leg_tracker bag (a robot following a person)
+        MOTA was 0.81 without it against 0.90 with no rigid objects at all.
+    rigid_join_m : float
+        Rigid clusters closer than this (0.5 m; from any scanner) are one object, and points closer than this to
+        a rigid cluster are part of it.
     max_age_s : float
         How far a scanner's latest scan may be from the time passed to :meth:`detect` (0.2 s).
     sensor : str
@@ -127,7 +164,10 @@ class LaserPeopleDetector:
                  bin_m: float = 0.05, c0_m: float = 0.20, min_cluster_points: int = 1, bandwidth_m: float = 0.40,
                  merge_m: float | None = None, min_segment_points: int = 3, pair_feet_m: float | None = 0.8,
                  foot_radius_m: float = 0.15, d_one_foot_m: float = 0.12,
-                 min_sigma_m: float = 0.05, max_age_s: float = 0.2, sensor: str = "laser") -> None:
+                 min_sigma_m: float = 0.05, rigid_min_m: float | None = 1.0, rigid_grazing_deg: float = 10.0,
+                 rigid_keep_m: float = 0.6, rigid_max_gap: float = 0.3, rigid_join_m: float = 0.5,
+                 max_age_s: float = 0.2,
+                 sensor: str = "laser") -> None:
         if not isinstance(scanners, Mapping) or not scanners:
             raise ValueError("scanners: expected a non-empty mapping of sensor name -> laser2world")
         self._scanners = {str(name): _Scanner(*planar_pose(T, f"scanners[{name!r}]"))
@@ -153,6 +193,22 @@ class LaserPeopleDetector:
         self.min_sigma_m = float(min_sigma_m)
         if not (math.isfinite(self.min_sigma_m) and self.min_sigma_m >= 0):
             raise ValueError(f"min_sigma_m: expected a finite value >= 0 m, got {min_sigma_m}")
+        if rigid_min_m is not None and not (isinstance(rigid_min_m, int | float) and not isinstance(rigid_min_m, bool)
+                                            and rigid_min_m > 0):
+            raise ValueError(f"rigid_min_m: expected a length > 0 m (inf: none), or None, got {rigid_min_m!r}")
+        if not (math.isfinite(rigid_join_m) and rigid_join_m >= 0):
+            raise ValueError(f"rigid_join_m: expected a finite value >= 0 m, got {rigid_join_m}")
+        if not 0.0 < float(rigid_grazing_deg) < 90.0:
+            raise ValueError(f"rigid_grazing_deg: expected an angle in (0, 90) degrees, got {rigid_grazing_deg}")
+        self.rigid_min_m = None if rigid_min_m is None or math.isinf(rigid_min_m) else float(rigid_min_m)
+        self.rigid_grazing_deg = float(rigid_grazing_deg)
+        if not (math.isfinite(rigid_keep_m) and rigid_keep_m > 0):
+            raise ValueError(f"rigid_keep_m: expected a finite length > 0 m, got {rigid_keep_m}")
+        self.rigid_keep_m = float(rigid_keep_m)
+        if not (math.isfinite(rigid_max_gap) and 0 < rigid_max_gap <= 1):
+            raise ValueError(f"rigid_max_gap: expected a fraction in (0, 1], got {rigid_max_gap}")
+        self.rigid_max_gap = float(rigid_max_gap)
+        self.rigid_join_m = float(rigid_join_m)
         self.max_age_s = float(max_age_s)
         if not (self.max_age_s >= 0 and math.isfinite(self.max_age_s)):
             raise ValueError(f"max_age_s: expected a finite value >= 0 s, got {max_age_s}")
@@ -254,6 +310,7 @@ class LaserPeopleDetector:
         elif st.primed_ns is not None and scan.t_ns <= st.primed_ns and geometry != st.geometry:
             st.t_ns = scan.t_ns  # a scan from before a geometry change the priming went through: no points
             st.points_m = np.zeros((0, 2))
+            st.rigid = np.zeros(0, np.int64)
             return
         elif geometry != st.geometry:
             log.warning("laser %s: scan geometry changed from %s to %s (beams, angle_min, increment); "
@@ -269,6 +326,7 @@ class LaserPeopleDetector:
             fg = st.background.update(r) if r.size else np.zeros(0, bool)
         if not fg.any():
             st.points_m = np.zeros((0, 2))
+            st.rigid = np.zeros(0, np.int64)
             return
         if self.min_cluster_points > 1:
             clusters = cluster_scan(np.where(fg, r, np.nan), scan.angle_min_rad, scan.angle_increment_rad,
@@ -278,7 +336,50 @@ class LaserPeopleDetector:
             keep = np.flatnonzero(fg & np.isfinite(r) & (r > 0))
         a = scan.angle_min_rad + keep * scan.angle_increment_rad
         local = np.column_stack([r[keep] * np.cos(a), r[keep] * np.sin(a)])
+        prev = st.points_m[st.rigid >= 0] if st.rigid.size == len(st.points_m) and st.rigid.size else None
         st.points_m = local @ st.rotation.T + st.translation
+        st.rigid = self._rigid_clusters(r, keep, local, scan, prev, st.rotation, st.translation)
+
+    def _rigid_clusters(self, r: np.ndarray, keep: np.ndarray, local: np.ndarray, scan: LaserScan,
+                        prev: np.ndarray | None, rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
+        """Rigid cluster of each kept beam (``keep``: beam indices, ``local``: their points), ``-1`` for none;
+        ``prev``: the rigid points of the scanner's previous scan, world frame."""
+        out = np.full(keep.size, -1, np.int64)
+        if self.rigid_min_m is None or keep.size < 2:
+            return out
+        on = np.full(r.size, np.nan)
+        on[keep] = r[keep]
+        labels = segment_scan(on, scan.angle_min_rad, scan.angle_increment_rad, c0_m=self.c0_m, n_min=2,
+                              grazing_deg=self.rigid_grazing_deg)[0][keep]
+        # clusters are beam-order runs: the first and last kept point of each
+        runs = np.flatnonzero(labels >= 0)
+        if runs.size == 0:
+            return out
+        lab = labels[runs]
+        new_cluster = np.r_[True, lab[1:] != lab[:-1]]
+        first = runs[new_cluster]
+        last = runs[np.r_[lab[1:] != lab[:-1], True]]
+        chord = np.hypot(*(local[last] - local[first]).T)
+        # one piece: no gap between consecutive points wider than rigid_max_gap of the chord
+        gap = np.zeros(runs.size)  # gap[i]: from point i to point i + 1 of the same cluster, else 0
+        d = np.diff(local[runs], axis=0)
+        gap[:-1] = np.where(new_cluster[1:], 0.0, np.hypot(d[:, 0], d[:, 1]))
+        piece = np.maximum.reduceat(gap, np.flatnonzero(new_cluster)) < self.rigid_max_gap * chord
+        long = piece & (chord >= self.rigid_min_m)
+        kept = np.flatnonzero(piece & ~long & (chord >= min(self.rigid_keep_m, self.rigid_min_m)))
+        if kept.size and prev is not None and len(prev):
+            # hysteresis: near the rigid points of the scanner's previous scan (world frame)
+            world = local @ rotation.T + translation
+            d, _ = cKDTree(prev).query(world[runs], distance_upper_bound=self.rigid_join_m)
+            near = np.zeros(int(lab.max()) + 1, bool)
+            near[lab[np.isfinite(d)]] = True
+            long[kept] = near[labels[first[kept]]]
+        if not long.any():
+            return out
+        new = np.full(int(lab.max()) + 1, -1, np.int64)
+        new[labels[first[long]]] = np.arange(int(long.sum()))
+        out[runs] = new[lab]
+        return out
 
     # ---------------------------------------------------------------------------------------------
     def foreground_points(self, t_ns: int) -> tuple[np.ndarray, np.ndarray]:
@@ -291,19 +392,72 @@ class LaserPeopleDetector:
         scanner : (n,) int64
             Index into :attr:`scanners` of the scanner each point came from.
         """
-        parts, owner = [], []
+        points, owner, _ = self._pooled(t_ns)
+        return points, owner
+
+    def _pooled(self, t_ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`foreground_points` and each point's rigid cluster, numbered across scanners (-1: none)."""
+        parts, owner, rigid = [], [], []
+        n_rigid = 0
         for i, st in enumerate(self._scanners.values()):
             if st.t_ns is not None and abs(int(t_ns) - st.t_ns) <= self._max_age_ns and len(st.points_m):
                 parts.append(st.points_m)
                 owner.append(np.full(len(st.points_m), i, dtype=np.int64))
+                rigid.append(np.where(st.rigid >= 0, st.rigid + n_rigid, -1))
+                n_rigid += int(st.rigid.max()) + 1 if st.rigid.size else 0
         if not parts:
-            return np.zeros((0, 2)), np.zeros(0, np.int64)
-        return np.concatenate(parts), np.concatenate(owner)
+            return np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return np.concatenate(parts), np.concatenate(owner), np.concatenate(rigid)
+
+    def rigid_objects(self, points_m: np.ndarray, rigid: np.ndarray) -> tuple[np.ndarray, int]:
+        """The rigid objects of pooled points: rigid clusters (``rigid``, per point, -1 for none) closer than
+        ``rigid_join_m`` are one, and points closer than that to one join it. Returns each point's object (-1 for
+        none; objects numbered from 0) and their number."""
+        on = np.flatnonzero(rigid >= 0)
+        out = np.full(len(points_m), -1, np.int64)
+        if on.size == 0:
+            return out, 0
+        lab = np.unique(rigid[on], return_inverse=True)[1].reshape(-1)
+        k = int(lab.max()) + 1
+        tree = cKDTree(points_m[on])
+        comp = np.arange(k)
+        if k > 1 and self.rigid_join_m > 0:
+            pairs = tree.query_pairs(self.rigid_join_m, output_type="ndarray")
+            a, b = lab[pairs[:, 0]], lab[pairs[:, 1]]
+            other = a != b
+            if other.any():
+                graph = coo_matrix((np.ones(int(other.sum())), (a[other], b[other])), shape=(k, k))
+                k, comp = connected_components(graph, directed=False)
+        out[on] = comp[lab]
+        loose = np.flatnonzero(rigid < 0)
+        if loose.size and self.rigid_join_m > 0:
+            d, i = tree.query(points_m[loose], distance_upper_bound=self.rigid_join_m)
+            near = np.isfinite(d)
+            out[loose[near]] = comp[lab[i[near]]]
+        return out, k
+
+    def objects(self, t_ns: int) -> tuple[np.ndarray, Segments, np.ndarray, int]:
+        """Everything :meth:`detect` finds at ``t_ns``, as arrays: the pooled points ``(n, 2)`` (those of
+        :meth:`foreground_points`), the two-feet :class:`Segments` of the points that are not part of a rigid
+        object (``labels`` and ``foot`` over all ``n`` points, ``-1`` on the rigid objects'), and each point's
+        rigid object (``-1`` for none) with their number."""
+        points, _, rigid = self._pooled(t_ns)
+        obj, k = self.rigid_objects(points, rigid)
+        if k == 0:
+            return points, self.segment(points), obj, 0
+        free = np.flatnonzero(obj < 0)
+        seg = self.segment(points[free])
+        labels = np.full(len(points), -1, np.int64)
+        labels[free] = seg.labels
+        foot = np.full(len(points), -1, seg.foot.dtype)
+        foot[free] = seg.foot
+        return points, dataclasses.replace(seg, labels=labels, foot=foot), obj, k
 
     def segments(self, t_ns: int) -> tuple[np.ndarray, Segments]:
-        """Array form of :meth:`detect`: the pooled points ``(n, 2)`` and their :class:`Segments`."""
-        points, _ = self.foreground_points(t_ns)
-        return points, self.segment(points)
+        """The two-feet part of :meth:`objects`: the pooled points ``(n, 2)`` and their :class:`Segments` (the
+        points of rigid objects in no segment)."""
+        points, seg, _, _ = self.objects(t_ns)
+        return points, seg
 
     def segment(self, points_m: np.ndarray) -> Segments:
         """The two-feet segments (B4, B5) of pooled foreground points ``(n, 2)``, with this detector's
@@ -318,24 +472,43 @@ class LaserPeopleDetector:
         Each detection has ``position_m`` = the segment centre (mean point), ``covariance_m2`` =
         ``min_sigma_m**2 I`` + the points' sample covariance, ``sensor`` = :attr:`sensor`, ``cls`` unknown
         (the classifier decides), and features ``"feet_m"`` (2, 2), ``"points_m"`` (k, 2),
-        ``"inter_feet_m"`` () float, ``"one_foot"`` () bool, ``"mode_m"`` (2,) the mean-shift mode.
+        ``"inter_feet_m"`` () float, ``"one_foot"`` () bool, ``"mode_m"`` (2,) the mean-shift mode, ``"rigid"``
+        () bool. The rigid objects (bicycles, cars: ``"rigid"`` true) come after the two-feet segments; their
+        position is the centre of the smallest rectangle around their points (``cv2.minAreaRect``), their
+        covariance ``min_sigma_m**2 I`` + the points' second moments about it, and their feet and mode are the
+        centre (no feet).
         """
         t_ns = int(t_ns)
-        points, seg = self.segments(t_ns)
+        points, seg, obj, n_obj = self.objects(t_ns)
         k = len(seg)
-        if k == 0:
-            return []
-        on = np.flatnonzero(seg.labels >= 0)
-        order = on[np.argsort(seg.labels[on], kind="stable")]
-        groups = np.split(points[order], np.cumsum(seg.n_points)[:-1])
-        cov = seg.covariances_m2 + self.min_sigma_m**2 * np.eye(2)
-        return [
-            Detection(t_ns, self.sensor, position_m=seg.centres_m[j], covariance_m2=cov[j],
-                      features={"feet_m": seg.feet_m[j], "points_m": groups[j],
-                                "inter_feet_m": np.asarray(seg.inter_feet_m[j]),
-                                "one_foot": np.asarray(seg.one_foot[j]), "mode_m": seg.modes_m[j]})
-            for j in range(k)
-        ]
+        out = []
+        eye = self.min_sigma_m**2 * np.eye(2)
+        if k:
+            on = np.flatnonzero(seg.labels >= 0)
+            order = on[np.argsort(seg.labels[on], kind="stable")]
+            groups = np.split(points[order], np.cumsum(seg.n_points)[:-1])
+            cov = seg.covariances_m2 + eye
+            no = np.asarray(False)
+            out = [Detection(t_ns, self.sensor, position_m=seg.centres_m[j], covariance_m2=cov[j],
+                             features={"feet_m": seg.feet_m[j], "points_m": groups[j],
+                                       "inter_feet_m": np.asarray(seg.inter_feet_m[j]),
+                                       "one_foot": np.asarray(seg.one_foot[j]), "mode_m": seg.modes_m[j],
+                                       "rigid": no})
+                   for j in range(k)]
+        if n_obj:
+            on = np.flatnonzero(obj >= 0)
+            order = on[np.argsort(obj[on], kind="stable")]
+            groups = np.split(points[order], np.cumsum(np.bincount(obj[on], minlength=n_obj))[:-1])
+            yes, zero, one = np.asarray(True), np.asarray(0.0), np.asarray(True)
+            for g in groups:
+                # the centre of the smallest rectangle around the points: the vehicle's centre when its sides are
+                # seen all round, not pulled towards the nearer scanner's denser points as the mean is
+                c = np.asarray(cv2.minAreaRect(g.astype(np.float32))[0], np.float64) if len(g) >= 3 else g.mean(0)
+                d = g - c
+                out.append(Detection(t_ns, self.sensor, position_m=c, covariance_m2=d.T @ d / len(g) + eye,
+                                     features={"feet_m": np.stack([c, c]), "points_m": g, "inter_feet_m": zero,
+                                               "one_foot": one, "mode_m": c, "rigid": yes}))
+        return out
 
 
 _BACKGROUND_ARGS = ("alpha", "beta", "gamma", "tau_fg_m", "n_init", "init", "bin_m")
@@ -360,7 +533,7 @@ def check_detector_params(params: Mapping[str, Any] | None, source: str = "laser
                           f"{', '.join(sorted(known))}")
     for key, value in out.items():  # numbers given as text: named here (the converters' messages name no key)
         default = signature[key].default
-        numeric = key in ("gamma", "merge_m", "pair_feet_m") or (
+        numeric = key in ("gamma", "merge_m", "pair_feet_m", "rigid_min_m") or (
             isinstance(default, int | float) and not isinstance(default, bool))
         if numeric and isinstance(value, str | bool):
             raise ConfigError(f"{source}: {key}: expected a number, got {value!r}")
