@@ -604,3 +604,42 @@ def test_kalman_baseline_interface() -> None:
                                              1.2 * np.sin(0.4 + 0.2 * np.sin(59 * 0.02))])) < 0.4
     assert trk.step(0, []) == []
     assert trk.dropped_steps == 1
+
+
+# ---- vehicles in the people pipeline (B18: constant velocity for bicycles and cars) ------------------------------
+
+
+def _car_and_walker(vehicles: bool) -> tuple[list[list[TrackState]], np.ndarray, np.ndarray]:
+    """A car at 8 m/s (its centre seen with 0.15 m noise, B18's σ) passing a walker at 1.2 m/s, 3 s at 25 Hz."""
+    rng = np.random.default_rng(5)
+    n = 75
+    car = np.column_stack([np.linspace(-10.0, -10.0 + 8.0 * (n - 1) * FRAME_NS / 1e9, n), np.full(n, 3.0)])
+    pos, feet = _walk(n, np.array([0.0, 0.0]), np.full(n, 0.3), 1.2, 0.7)
+    trk = LaserPeopleTracker({"vehicles": vehicles}, rng=0)
+    out = []
+    for k in range(n):
+        c = car[k] + rng.normal(0.0, 0.15, 2)
+        side = c + np.column_stack([np.linspace(-2.2, 2.2, 40), np.full(40, -0.9)])
+        rigid = Detection(k * FRAME_NS, "laser", position_m=c, features={
+            "feet_m": np.stack([c, c]), "inter_feet_m": np.asarray(0.0), "one_foot": np.asarray(True),
+            "points_m": side, "rigid": np.asarray(True)})
+        out.append(trk.step(k * FRAME_NS, [_detection(k * FRAME_NS, feet[k], rng), rigid]))
+    return out, car, pos
+
+
+def test_a_car_is_followed_with_constant_velocity_and_its_own_id() -> None:
+    out, car, pos = _car_and_walker(vehicles=True)
+    on_car = [s for k, states in enumerate(out) for s in states if np.hypot(*(s.position_m - car[k])) < 1.0]
+    on_walker = [s for k, states in enumerate(out) for s in states if np.hypot(*(s.position_m - pos[k])) < 0.3]
+    assert {s.track_id for s in on_car} == {on_car[0].track_id}
+    assert len(on_car) >= len(out) - TrackerParams().vehicle_n_confirm  # confirmed, then every frame
+    assert {s.track_id for s in on_walker} == {on_walker[0].track_id} != {on_car[0].track_id}
+    late = [s for s in on_car if s.t_ns >= 25 * FRAME_NS]
+    assert np.abs(np.array([s.velocity_mps for s in late]) - [8.0, 0.0]).max() < 1.0
+
+
+def test_the_walking_model_cannot_follow_a_car() -> None:
+    # Why vehicles get their own filter: the walking model's top speed is S / T = 2.5 m/s.
+    out, car, _ = _car_and_walker(vehicles=False)
+    on_car = [s for k, states in enumerate(out) for s in states if np.hypot(*(s.position_m - car[k])) < 1.0]
+    assert len({s.track_id for s in on_car}) >= 3 or len(on_car) < len(out) / 2

@@ -16,13 +16,13 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
 
 from ..errors import ConfigError
-from ..types import Detection, Event, Situation, TrackState
+from ..types import Detection, Event, ObjectClass, Situation, TrackState
 from . import kalman
 from .association import hungarian
 from .situations import on_edge
@@ -53,11 +53,22 @@ class CVKalmanTracker:
         Only used to name births and deaths (``appear``/``disappear`` on the edge).
     d_edge_m : float
     sensor : str
+    fragments : bool
+        Pieces of one object: a detection left over by the assignment but within ``gate_m`` of a track is part of
+        the nearest such track, whose measurement is then the mean of its detections' centres weighted by their
+        points (feature ``"points_m"``); it starts no track. For vehicles, whose sides two scanners see apart.
+    cls : str
+        The class of the states (``person``; the vehicles of :class:`~fusiontrack.tracking.tracker.
+        LaserPeopleTracker`: ``unknown`` until a classifier gives them theirs).
+    ids : iterator of int, optional
+        Where new track ids come from (default: 1, 2, ...); :class:`~fusiontrack.tracking.tracker.
+        LaserPeopleTracker` passes its own, so that its vehicles and people share one id space.
     """
 
     def __init__(self, *, q: float = 2.0, r_m: float = 0.05, gate_m: float = 0.8, n_confirm: int = 3,
                  n_miss: int = 25, frame_s: float = 0.04, candidate_gate_m: float = 0.5, candidate_gap_s: float = 0.25,
-                 area_m: Any = None, d_edge_m: float = 0.5, sensor: str = "laser") -> None:
+                 area_m: Any = None, d_edge_m: float = 0.5, sensor: str = "laser", fragments: bool = False,
+                 cls: str = "person", ids: Iterator[int] | None = None) -> None:
         for name, v in (("q", q), ("r_m", r_m), ("gate_m", gate_m), ("frame_s", frame_s),
                         ("candidate_gate_m", candidate_gate_m), ("candidate_gap_s", candidate_gap_s)):
             if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
@@ -70,15 +81,27 @@ class CVKalmanTracker:
         self.area_m = area_polygon(area_m)
         self.d_edge_m = float(d_edge_m)
         self.sensor = str(sensor)
+        self.fragments = bool(fragments)
+        self.cls = str(ObjectClass(cls))
         self.events: list[Event] = []
         self.dropped_steps = 0
-        self._next_id = itertools.count(1)
+        self._next_id = itertools.count(1) if ids is None else ids
         self._t: int | None = None
         self._x = np.zeros((0, 4))
         self._P = np.zeros((0, 4, 4))
         self._id = np.zeros(0, np.int64)
         self._seen = np.zeros(0, np.int64)
         self._cand = CandidateSet(candidate_gate_m, candidate_gap_s)
+
+    @property
+    def n_tracks(self) -> int:
+        """Live tracks (confirmed, not ended)."""
+        return int(self._id.size)
+
+    @property
+    def idle(self) -> bool:
+        """No track and no candidate: a step without detections would change nothing."""
+        return self._id.size == 0 and len(self._cand) == 0
 
     def _edge(self, points: np.ndarray) -> np.ndarray:
         if self.area_m is None or points.shape[0] == 0:
@@ -106,6 +129,19 @@ class CVKalmanTracker:
             pairs, _, _ = hungarian(cost, gate=self.gate_m)
             meas[pairs[:, 0]] = z[pairs[:, 1]]
             taken[pairs[:, 1]] = True
+            if self.fragments and not taken.all() and pairs.size:
+                near = np.flatnonzero(~taken)
+                row = cost[:, near].argmin(axis=0)
+                ok = cost[row, near] <= self.gate_m
+                if ok.any():
+                    owner = np.concatenate([pairs[:, 0], row[ok]])
+                    dets = np.concatenate([pairs[:, 1], near[ok]])
+                    w = np.array([max(len(detections[j].features.get("points_m", ())), 1) for j in dets], float)
+                    total = np.bincount(owner, w, n)
+                    for c in (0, 1):
+                        meas[:, c] = np.where(total > 0, np.bincount(owner, w * z[dets, c], n)
+                                              / np.maximum(total, 1e-12), meas[:, c])
+                    taken[near[ok]] = True
         updated = ~np.isnan(meas[:, 0])
         if updated.any():
             self._x, self._P = kalman.update(self._x, self._P, meas, R=self.r_m**2)
@@ -114,7 +150,7 @@ class CVKalmanTracker:
         dead = (t_ns - self._seen) > round(self.n_miss * frame_ns)
         seen, none = (self.sensor,), ()
         states = [_fast_state(t_ns, self.sensor, int(self._id[i]), self._x[i, 0:2], self._x[i, 2:4], _NONCORRELATED,
-                              seen if updated[i] else none, self._P[i])
+                              seen if updated[i] else none, self._P[i], cls=self.cls)
                   for i in np.flatnonzero(~dead)]
         if dead.any():
             edge = self._edge(self._x[dead, 0:2])
@@ -142,7 +178,7 @@ class CVKalmanTracker:
                 self._seen = np.append(self._seen, t_ns)
                 self.events.append(Event(int(cd.first_t[c]), self.sensor, "appear" if cd.edge[c] else "born", t_ns,
                                          position_m=cd.first_pos[c].copy(), track_ids=(tid,)))
-                states.append(TrackState(t_ns, self.sensor, tid, x0[0:2], x0[2:4], covariance=P0,
+                states.append(TrackState(t_ns, self.sensor, tid, x0[0:2], x0[2:4], covariance=P0, cls=self.cls,
                                          situation=Situation.NONCORRELATED, sensors=(self.sensor,)))
             self._cand.pop(ready)
         return states

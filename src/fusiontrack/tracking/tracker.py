@@ -31,7 +31,12 @@ The step follows ARCHITECTURE.md's "Tracker step" (ALGORITHMS.md sections in bra
    algorithm [X2] and each recovered member's particle filter restarts at its detection with its
    pre-merge T, S and ψ (members left over stay merged). A merged target whose segments show at most two
    leg blobs for ``single_s`` seconds holds one person: the member nearest to it goes on, the others end;
-6. **lifecycle** — unclaimed detections become candidates, confirmed after ``n_confirm`` frames on the edge
+6. **vehicles** — the detector's rigid objects (feature ``"rigid"``: the whole side of a bicycle or a car) are
+   not walkers: they go to constant-velocity Kalman filters on their centroid (B18, X5;
+   :class:`~fusiontrack.tracking.baseline.CVKalmanTracker` with ``vehicle_*`` parameters), in the same id space,
+   never merged with people. (Walking particle filters cannot follow them: the walking model's top speed is
+   S / T = 2.5 m/s, a bicycle's 4 m/s and a car's 8 m/s);
+7. **lifecycle** — unclaimed detections become candidates, confirmed after ``n_confirm`` frames on the edge
    of the covered area or ``n_confirm_interior`` inside it; a target with no detection coasts, and ends
    after ``n_miss_edge`` frames on the edge (once it is ``edge_min_age_s`` old, and with ``edge_leave_s`` only
    if it is heading out) or ``n_miss`` frames elsewhere [B7]. Standing people switch to the random-walk model
@@ -147,6 +152,12 @@ def _starts(sizes: list[int]) -> list[int]:
         out.append(k)
         k += n
     return out
+
+
+def _rigid(d: Detection) -> bool:
+    """A rigid object of the detector (a bicycle or a car), not a two-feet segment."""
+    r = d.features.get("rigid")
+    return r is not None and bool(r)
 
 
 def _all(a: np.ndarray) -> bool:
@@ -290,6 +301,26 @@ class TrackerParams:
         inside within ``2h + glimpse_speed_mps`` per second since the glimpse ended is that person: born on the
         edge (``appear``, dated by the glimpse). The measurement truth dates an appear by the first glimpse on
         the edge and confirms it by a later sighting anywhere [RECON]. 0 forgets glimpses.
+    vehicles : bool
+        Track the detector's rigid objects (detections with feature ``"rigid"``: bicycles and cars, B18) with
+        constant-velocity Kalman filters (X5) on their centroid, apart from the walking people; their tracks share
+        the id space and the events. False: rigid objects are detections like any other (walking model).
+    vehicle_q : float
+        X5's ``q`` of those filters, m²/s³ (B18: 1 for cars, 0.5 for bicycles; one filter for both, as the class
+        is known only after a window of frames).
+    vehicle_sigma_m : float
+        σ of a rigid object's centroid (B18: 0.15 m).
+    vehicle_gate_m : float
+        Largest distance of a vehicle track to its detection (2 m: the centroid of the visible sides moves
+        along the vehicle as it passes a scanner).
+    vehicle_candidate_gate_m : float
+        As ``candidate_gate_m``, for new vehicle tracks (1 m: 8 m/s is 0.32 m a frame).
+    vehicle_n_confirm : int
+        Frames a rigid object must be seen to start a vehicle track (10, 0.4 s). Two or three people abreast
+        whose legs the scan strings together make a rigid object now and then (6 detections in 3000 frames of
+        each 60 s simulated crowd, seeds 0-2), in bursts of at most 4 frames.
+    vehicle_n_miss : int
+        Frames a vehicle track coasts without a detection (25).
     sensor : str
         ``TrackState.sensor``, ``Event.sensor`` and what ``TrackState.sensors`` names when a detection
         confirmed the track.
@@ -346,12 +377,19 @@ class TrackerParams:
     appear_latency_s: float = 0.75
     glimpse_s: float = 5.0
     glimpse_speed_mps: float = 1.5
+    vehicles: bool = True
+    vehicle_q: float = 1.0
+    vehicle_sigma_m: float = 0.15
+    vehicle_gate_m: float = 2.0
+    vehicle_candidate_gate_m: float = 1.0
+    vehicle_n_confirm: int = 10
+    vehicle_n_miss: int = 25
     sensor: str = "laser"
 
     def __post_init__(self) -> None:
         positive = ("bandwidth_m", "gate", "frame_s", "candidate_gate_m", "candidate_gap_s", "sigma_f_m",
                     "sigma_w_m", "sigma_f_one_m", "velocity_tau_s", "merged_r_m", "member_tau_s", "max_dt_s",
-                    "member_alpha")
+                    "member_alpha", "vehicle_q", "vehicle_sigma_m", "vehicle_gate_m", "vehicle_candidate_gate_m")
         for name in positive:
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
@@ -367,7 +405,7 @@ class TrackerParams:
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
                 raise ConfigError(f"tracker parameter {name}: expected a finite value >= 0, got {v!r}")
         for name in ("n_particles", "n_confirm", "n_confirm_interior", "n_miss", "n_miss_edge", "n_merge", "n_split",
-                     "standing_frames"):
+                     "standing_frames", "vehicle_n_confirm", "vehicle_n_miss"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
                 raise ConfigError(f"tracker parameter {name}: expected an integer >= 1, got {v!r}")
@@ -375,6 +413,8 @@ class TrackerParams:
             raise ConfigError(f"tracker parameter multi_fraction: expected 0..1 or None, got {self.multi_fraction!r}")
         if not 0.0 <= self.reseed_fraction <= 1.0:
             raise ConfigError(f"tracker parameter reseed_fraction: expected 0..1, got {self.reseed_fraction!r}")
+        if not isinstance(self.vehicles, bool):
+            raise ConfigError(f"tracker parameter vehicles: expected true or false, got {self.vehicles!r}")
 
     def replace(self, **changes: Any) -> TrackerParams:
         """A copy with some fields changed (unknown names are a :class:`ConfigError`)."""
@@ -752,14 +792,16 @@ def _max_pair_distance(points: np.ndarray) -> float:
 
 
 def _fast_state(t_ns: int, sensor: str, track_id: int, position: np.ndarray, velocity: np.ndarray, situation: str,
-                sensors: tuple[str, ...], covariance: np.ndarray | None = None, *, frozen: bool = False) -> TrackState:
+                sensors: tuple[str, ...], covariance: np.ndarray | None = None, *, frozen: bool = False,
+                cls: str | None = None) -> TrackState:
     """A :class:`TrackState` built without re-validating values the tracker already guarantees (hot path).
 
     Equivalent to ``TrackState(t_ns, sensor, track_id, position, velocity, situation=situation,
     sensors=sensors)`` for an int time and id, finite (2,) float arrays, a valid situation string and a
     tuple of str (and a finite (4, 4) ``covariance`` or None): the arrays are copied and made read-only
     exactly as the constructor does. ``frozen``: ``position`` and ``velocity`` are already such read-only
-    float64 copies (rows of a :func:`_frozen_copy`, which nobody writes), taken as they are.
+    float64 copies (rows of a :func:`_frozen_copy`, which nobody writes), taken as they are. ``cls``: an
+    :class:`~fusiontrack.types.ObjectClass` value (default ``person``).
     """
     st = object.__new__(TrackState)
     if frozen:
@@ -781,7 +823,7 @@ def _fast_state(t_ns: int, sensor: str, track_id: int, position: np.ndarray, vel
     set_pos(st, pos)
     set_vel(st, vel)
     set_cov(st, covariance)
-    set_cls(st, _PERSON)
+    set_cls(st, _PERSON if cls is None else cls)
     set_situation(st, situation)
     set_sensors(st, sensors)
     set_score(st, 1.0)
@@ -891,9 +933,19 @@ class LaserPeopleTracker:
         # fusion hooks (seed 001 B16, B17), off by default: see the class docstring
         self._extra_ll = extra_log_likelihood
         self._split_scores = split_scores
+        self._next_id = itertools.count(1)
+        self._vehicles: Any = None
+        if p.vehicles:
+            from .baseline import CVKalmanTracker
+
+            self._vehicles = CVKalmanTracker(q=p.vehicle_q, r_m=p.vehicle_sigma_m, gate_m=p.vehicle_gate_m,
+                                             n_confirm=p.vehicle_n_confirm, n_miss=p.vehicle_n_miss, frame_s=p.frame_s,
+                                             candidate_gate_m=p.vehicle_candidate_gate_m,
+                                             candidate_gap_s=p.candidate_gap_s, d_edge_m=p.d_edge_m,
+                                             sensor=p.sensor, fragments=True, ids=self._next_id,
+                                             cls=str(ObjectClass.UNKNOWN))
         self.area_m = area_m
         self.rng = _rng(rng)
-        self._next_id = itertools.count(1)
         self._t: int | None = None
         self.events: list[Event] = []
         self.dropped_steps = 0
@@ -932,6 +984,8 @@ class LaserPeopleTracker:
     def area_m(self, value: Any) -> None:
         self._area = area_polygon(value)
         self._rect = None
+        if self._vehicles is not None:
+            self._vehicles.area_m = self._area
         a = self._area
         if a is not None and a.shape == (4, 2):  # an axis-aligned rectangle: a cheaper edge test
             xs, ys = np.unique(a[:, 0]), np.unique(a[:, 1])
@@ -941,8 +995,13 @@ class LaserPeopleTracker:
 
     @property
     def n_targets(self) -> int:
-        """Live targets: walking targets plus the members of merged targets."""
+        """Live targets: walking targets plus the members of merged targets (not the vehicles)."""
         return int(self._id.size) + sum(len(m.info) for m in self._merged)
+
+    @property
+    def n_vehicles(self) -> int:
+        """Live vehicle tracks (constant velocity, on the detector's rigid objects)."""
+        return 0 if self._vehicles is None else self._vehicles.n_tracks
 
     @property
     def merged_ids(self) -> frozenset[int]:
@@ -990,9 +1049,17 @@ class LaserPeopleTracker:
             return []
         dt = 0.0 if self._t is None else min((t_ns - self._t) / 1e9, self.params.max_dt_s)
         self._t = t_ns
+        rigid: list[Detection] = []
+        if self._vehicles is not None and any(_rigid(d) for d in detections):
+            rigid = [d for d in detections if _rigid(d)]
+            detections = [d for d in detections if not _rigid(d)]
         det = detection_arrays(detections)
         self._predict(dt)
-        return self._update(t_ns, dt, det)
+        states = self._update(t_ns, dt, det)
+        if self._vehicles is not None and (rigid or not self._vehicles.idle):
+            states.extend(self._vehicles.step(t_ns, rigid))
+            self.events.extend(self._vehicles.events)
+        return states
 
     def finish(self) -> list[Event]:
         """End of a run: the events still held back (correlated runs still open, splits waiting to be sure)."""
