@@ -94,15 +94,25 @@ class ObjectClassifier:
         out = np.cumsum(hit, axis=1)[:, -1, :] if hit.shape[1] else np.zeros((len(x), len(self.classes)))
         return out / max(float(self.alpha.sum()), 1e-12)
 
-    def predict(self, X: Any) -> np.ndarray:
+    def predict(self, X: Any, vehicle: Any = None) -> np.ndarray:
         """The class with the largest margin among those whose training windows were ever as narrow as the
-        window (``min_width_m``; when none was, the class with the narrowest training window), ``(m,)`` str."""
+        window (``min_width_m``; when none was, the class with the narrowest training window), ``(m,)`` str.
+
+        ``vehicle`` (``(m,)`` bool, optional): rows known not to be people (the detector's rigid objects, whole
+        sides a metre long or more); their class is the largest margin among the other classes."""
         m = self.margins(X)
         if not len(m):
             return np.zeros(0, object)
         width = np.asarray(X, dtype=np.float64)[:, _WIDTH]
         seen = width[:, None] >= self.min_width_m  # (m, C)
         seen[:, int(np.argmin(self.min_width_m))] = True  # (the narrowest class is the fallback)
+        if vehicle is not None:
+            rows = np.asarray(vehicle, dtype=bool).reshape(-1)
+            if rows.shape != (len(m),):
+                raise ValueError(f"vehicle: expected shape ({len(m)},), got {np.shape(vehicle)}")
+            person = np.array([c == "person" for c in self.classes])
+            if rows.any() and (~person).any():
+                seen[rows] = ~person
         return np.array(self.classes, dtype=object)[np.argmax(np.where(seen, m, -1.0), axis=1)]
 
     # ------------------------------------------------------------------------------------------------

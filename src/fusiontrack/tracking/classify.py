@@ -8,7 +8,9 @@ every track with a full window every ``every`` frames (:class:`~fusiontrack.lase
 one vectorised call for all tracks) and smooths the class by a majority vote over the last ``vote``
 predictions (B18 votes over 10 frames; 3 predictions 5 frames apart cover 15). A settled track (its last
 ``vote`` predictions agree) is predicted every ``settled_every`` frames only. The states come back with
-``cls`` set; a track keeps the tracker's class until its first prediction.
+``cls`` set; a track keeps the tracker's class until its first prediction. A track whose window is mostly the
+detector's rigid objects (feature ``"rigid"``: a whole side a metre long or more) is a bicycle or a car, whichever
+has the larger margin: the detector has already told it from people.
 """
 
 from __future__ import annotations
@@ -69,7 +71,7 @@ class TrackClassifier:
         self.settled_every = int(settled_every)
         self.model = default_classifier() if model is None else model
         self.window, self.every, self.vote, self.gate_m = int(window), int(every), int(vote), float(gate_m)
-        # [t_s, points, centre, shape row or None]: a segment's shape is computed once, when it is first used
+        # [t_s, points, centre, shape row or None, rigid]: a segment's shape is computed once, when it is first used
         # (each row is in window / every predictions; a segment's features do not depend on the others')
         self._rows: dict[int, deque[list[Any]]] = {}
         self._frame = -1
@@ -127,7 +129,8 @@ class TrackClassifier:
                         rows = self._rows.get(s.track_id)
                         if rows is None:
                             rows = self._rows[s.track_id] = deque(maxlen=self.window)
-                        rows.append([t_s, have[jj].features["points_m"], centres[jj], None])
+                        rows.append([t_s, have[jj].features["points_m"], centres[jj], None,
+                                     bool(have[jj].features.get("rigid", False))])
         # Every track with a full window is predicted on the same frames (one vectorised call per `every`
         # frames, not a few tracks on every frame).
         self._frame += 1
@@ -149,7 +152,8 @@ class TrackClassifier:
             g = np.array([r[3] for r in segs]).reshape(len(full), self.window, len(GEOMETRIC_FEATURES))
             c = np.array([r[2] for r in segs]).reshape(len(full), self.window, 2)
             t = np.array([r[0] for r in segs]).reshape(len(full), self.window)
-            pred = self.model.predict(window_features(g, c, t - t[:, :1]))
+            rigid = np.array([r[4] for r in segs]).reshape(len(full), self.window).mean(axis=1) > 0.5
+            pred = self.model.predict(window_features(g, c, t - t[:, :1]), vehicle=rigid)
             for tid, p in zip(full, pred, strict=True):
                 votes = self._votes.setdefault(tid, deque(maxlen=self.vote))
                 votes.append(str(p))
