@@ -206,6 +206,10 @@ def test_parameters_are_validated_by_name() -> None:
     with pytest.raises(ConfigError, match="area"):
         LaserPeopleTracker(area_m=[1, 2, 0, 0])
     assert LaserPeopleTracker({"n_particles": 50}).params.n_particles == 50
+    for key, value in (("vehicles", "yes"), ("vehicle_q", 0.0), ("vehicle_gate_m", np.inf), ("vehicle_n_confirm", 0)):
+        with pytest.raises(ConfigError, match=key):
+            TrackerParams(**{key: value})
+    assert LaserPeopleTracker({"vehicles": False}).n_vehicles == 0
 
 
 # ---- merged targets (B7 rules 1-2, B17) -----------------------------------------------------------------------

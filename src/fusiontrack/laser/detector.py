@@ -268,6 +268,7 @@ class LaserPeopleDetector:
         keep_primed_backgrounds(self._scanners.values())
         for st in self._scanners.values():
             st.points_m = np.zeros((0, 2))
+            st.rigid = np.zeros(0, np.int64)
         self.dropped_scans = dict.fromkeys(self._scanners, 0)  # the tracking pass meets (and counts) them again
         return used
 
