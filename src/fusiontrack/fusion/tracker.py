@@ -1271,7 +1271,8 @@ def _image_topic(rec: Any, camera_topic: str | None) -> str | None:
     found = [t for t, i in topics.items() if i in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
              and not t.endswith(("/labels", "/depth")) and "depth" not in t.split("/")[-1]]
     if len(found) > 1:
-        raise ConfigError(f"{rec.paths[0]}: several image topics ({', '.join(found)}); choose one with camera_topic")
+        raise ConfigError(f"{rec.paths[0]}: several image topics ({', '.join(found)}); choose one with camera_topic "
+                          "(--camera-topic)")
     return found[0] if found else None
 
 
