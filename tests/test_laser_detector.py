@@ -300,21 +300,22 @@ def test_without_rigid_objects_a_car_is_cut_into_walker_sized_pieces() -> None:
 
 
 def test_a_rigid_object_seen_shorter_stays_rigid_and_a_short_new_one_is_not() -> None:
-    def rigid_after(lengths: list[float]) -> bool:
+    def rigid_after(lengths: list[float], step_ns: int = PERIOD_NS) -> bool:
         rng = np.random.default_rng(RNG_SEED)
         det = _detector()
         t = _learn_empty_room(det, rng)
         for k, length in enumerate(lengths):
             for name in POSES:
                 # the line lies across both scanners' views (heading 2.3 rad)
-                det.update(_scan(name, t + k * PERIOD_NS, None, rng, sides=_line((6.0, 5.0), length, 2.3)))
-            dets = det.detect(t + k * PERIOD_NS)
+                det.update(_scan(name, t + k * step_ns, None, rng, sides=_line((6.0, 5.0), length, 2.3)))
+            dets = det.detect(t + k * step_ns)
         return any(bool(d.features["rigid"]) for d in dets)
 
     assert rigid_after([1.2])
     assert not rigid_after([0.8])  # below rigid_min_m (1 m): walker-sized
     assert rigid_after([1.2, 0.8])  # hysteresis: above rigid_keep_m (0.6 m) next to last scan's rigid points
     assert not rigid_after([1.2, 0.4])
+    assert not rigid_after([1.2, 0.8], step_ns=3 * PERIOD_NS)  # the scanners were silent longer than max_age_s
 
 
 def test_legs_strung_together_in_depth_are_not_a_rigid_object() -> None:
@@ -336,7 +337,30 @@ def test_legs_strung_together_in_depth_are_not_a_rigid_object() -> None:
     legs = np.repeat([15.0, 15.5, 16.0], 4)
     assert objects(legs) == [(False, 4)] * 3
     assert objects(legs, rigid_max_gap=1.0) == [(True, 12)]  # what the gap test prevents
-    assert objects(np.linspace(15.0, 16.2, 40)) == [(True, 40)]
+    side = np.linspace(15.0, 16.2, 40)
+    assert objects(side) == [(True, 40)]
+    # beams without a return inside the side (glass, dark paint: NaN, inf, 0) do not cut it
+    holes = side.copy()
+    holes[[8, 20, 21, 30]] = [np.nan, np.inf, 0.0, np.nan]
+    assert objects(holes) == [(True, 36)]
+
+
+def test_a_rigid_objects_centre_is_exact_far_from_the_origin() -> None:
+    # A georeferenced world (UTM-like coordinates): the centre must not be computed in float32 world metres.
+    inc = np.deg2rad(0.375)
+    origin = np.array([5.0e5, 5.4e6])
+    det = LaserPeopleDetector({"s": pose2d_to_matrix(*origin, 0.0)})
+    for k in range(60):
+        det.update(LaserScan(k * PERIOD_NS, "s", "s", -np.pi / 2, inc, 0.05, 40.0, np.full(480, 25.0, np.float32)))
+    # a flat wall-like side 5 m ahead, across beams 220-259 (x = 5 m in the scanner frame)
+    r = np.full(480, 25.0)
+    beams = np.arange(220, 260)
+    r[beams] = 5.0 / np.cos(-np.pi / 2 + beams * inc)
+    det.update(LaserScan(60 * PERIOD_NS, "s", "s", -np.pi / 2, inc, 0.05, 40.0, r.astype(np.float32)))
+    (d,) = det.detect(60 * PERIOD_NS)
+    assert bool(d.features["rigid"])
+    y = 5.0 * np.tan(-np.pi / 2 + beams[[0, -1]] * inc)
+    assert np.hypot(*(d.position_m - (origin + np.array([5.0, y.mean()])))) < 0.01
 
 
 def test_rigid_object_parameters_are_checked() -> None:

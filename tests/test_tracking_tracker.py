@@ -209,7 +209,6 @@ def test_parameters_are_validated_by_name() -> None:
     for key, value in (("vehicles", "yes"), ("vehicle_q", 0.0), ("vehicle_gate_m", np.inf), ("vehicle_n_confirm", 0)):
         with pytest.raises(ConfigError, match=key):
             TrackerParams(**{key: value})
-    assert LaserPeopleTracker({"vehicles": False}).n_vehicles == 0
 
 
 # ---- merged targets (B7 rules 1-2, B17) -----------------------------------------------------------------------
@@ -613,7 +612,7 @@ def test_kalman_baseline_interface() -> None:
 # ---- vehicles in the people pipeline (B18: constant velocity for bicycles and cars) ------------------------------
 
 
-def _car_and_walker(vehicles: bool) -> tuple[list[list[TrackState]], np.ndarray, np.ndarray]:
+def _car_and_walker(vehicles: bool) -> tuple[list[list[TrackState]], np.ndarray, np.ndarray, LaserPeopleTracker]:
     """A car at 8 m/s (its centre seen with 0.15 m noise, B18's σ) passing a walker at 1.2 m/s, 3 s at 25 Hz."""
     rng = np.random.default_rng(5)
     n = 75
@@ -628,11 +627,11 @@ def _car_and_walker(vehicles: bool) -> tuple[list[list[TrackState]], np.ndarray,
             "feet_m": np.stack([c, c]), "inter_feet_m": np.asarray(0.0), "one_foot": np.asarray(True),
             "points_m": side, "rigid": np.asarray(True)})
         out.append(trk.step(k * FRAME_NS, [_detection(k * FRAME_NS, feet[k], rng), rigid]))
-    return out, car, pos
+    return out, car, pos, trk
 
 
 def test_a_car_is_followed_with_constant_velocity_and_its_own_id() -> None:
-    out, car, pos = _car_and_walker(vehicles=True)
+    out, car, pos, _ = _car_and_walker(vehicles=True)
     on_car = [s for k, states in enumerate(out) for s in states if np.hypot(*(s.position_m - car[k])) < 1.0]
     on_walker = [s for k, states in enumerate(out) for s in states if np.hypot(*(s.position_m - pos[k])) < 0.3]
     assert {s.track_id for s in on_car} == {on_car[0].track_id}
@@ -642,8 +641,20 @@ def test_a_car_is_followed_with_constant_velocity_and_its_own_id() -> None:
     assert np.abs(np.array([s.velocity_mps for s in late]) - [8.0, 0.0]).max() < 1.0
 
 
+def test_vehicle_tracks_are_counted_and_named_apart_from_people() -> None:
+    out, _, _, trk = _car_and_walker(vehicles=True)
+    unknown = {s.track_id for states in out for s in states if s.cls == "unknown"}  # walking tracks: person
+    assert trk.vehicle_ids == unknown
+    assert len(unknown) == 1
+    assert trk.n_vehicles == 1
+    assert trk.n_targets == 1  # the walker
+    _, _, _, off = _car_and_walker(vehicles=False)
+    assert off.vehicle_ids == frozenset()
+    assert off.n_vehicles == 0
+
+
 def test_the_walking_model_cannot_follow_a_car() -> None:
     # Why vehicles get their own filter: the walking model's top speed is S / T = 2.5 m/s.
-    out, car, _ = _car_and_walker(vehicles=False)
+    out, car, _, _ = _car_and_walker(vehicles=False)
     on_car = [s for k, states in enumerate(out) for s in states if np.hypot(*(s.position_m - car[k])) < 1.0]
     assert len({s.track_id for s in on_car}) >= 3 or len(on_car) < len(out) / 2

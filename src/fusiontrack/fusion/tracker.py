@@ -664,7 +664,25 @@ class FusionTracker:
         self._used = set()
         self.stats.steps += 1
         states = self.laser.step(t_ns, detections)
-        self.events = self._out_events(self.laser.events)
+        # Vehicles (the laser tracker's constant-velocity tracks of rigid objects) are not people: no camera
+        # classifiers, checks or re-identification; their states and events pass through.
+        vehicles = self.laser.vehicle_ids
+        cars: list[TrackState] = []
+        car_events: list[Event] = []
+        events = self.laser.events
+        if vehicles:
+            cars = [s for s in states if s.track_id in vehicles]
+            states = [s for s in states if s.track_id not in vehicles]
+            car_events = [e for e in events if vehicles.intersection(e.track_ids)]
+            events = [e for e in events if not vehicles.intersection(e.track_ids)]
+        self.events = self._out_events(events)
+        out = self._people_step(t_ns, states)
+        if car_events:
+            self.events.extend(car_events)
+        return out + cars if cars else out
+
+    def _people_step(self, t_ns: int, states: list[TrackState]) -> list[TrackState]:
+        """:meth:`step` for the people's states."""
         if self._alias:
             states = [dataclasses.replace(st, track_id=self._alias[st.track_id]) if st.track_id in self._alias
                       else st for st in states]

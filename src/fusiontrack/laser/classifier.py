@@ -99,7 +99,8 @@ class ObjectClassifier:
         window (``min_width_m``; when none was, the class with the narrowest training window), ``(m,)`` str.
 
         ``vehicle`` (``(m,)`` bool, optional): rows known not to be people (the detector's rigid objects, whole
-        sides a metre long or more); their class is the largest margin among the other classes."""
+        sides a metre long or more); their class is the largest margin among the other classes, whatever their
+        width (``min_width_m`` does not apply: they are a metre wide or more)."""
         m = self.margins(X)
         if not len(m):
             return np.zeros(0, object)

@@ -8,16 +8,19 @@ Per scan (:meth:`LaserPeopleDetector.update`), for the scanner that made it:
    beams are clustered in beam order (A8, :func:`~fusiontrack.laser.clustering.cluster_scan`) to drop clusters
    of fewer beams;
 3. the surviving points are moved into the world frame with the scanner's ``laser2world`` (B2);
-4. **rigid objects**: the foreground beams are also clustered in beam order with A8 joined across grazing sides
-   (:func:`~fusiontrack.laser.clustering.segment_scan`); a cluster whose first and last points are at least
-   ``rigid_min_m`` (1 m) apart is the side of a bicycle or a car, not a person (a person's beam-order clusters
-   are legs, a few centimetres to half a metre across), and its points are marked rigid.
+4. **rigid objects**: the surviving beams are also clustered in beam order with A8 joined across grazing sides
+   (:func:`~fusiontrack.laser.clustering.segment_scan`; up to two beams without a return inside are bridged); a
+   cluster in one piece (no gap wider than ``rigid_max_gap`` of its length) whose first and last points are at
+   least ``rigid_min_m`` (1 m) apart, or ``rigid_keep_m`` (0.6 m) next to the scanner's rigid points of its
+   previous scan, is the side of a bicycle or a car, not a person (a person's beam-order clusters are legs, a few
+   centimetres to half a metre across), and its points are marked rigid.
 
 Per frame (:meth:`LaserPeopleDetector.detect`): the latest foreground points of every scanner are pooled. The rigid
-clusters of all scanners within ``rigid_join_m`` of each other, and the loose points within that distance of them,
-form one rigid object each: a :class:`~fusiontrack.types.Detection` with feature ``"rigid"`` (B18's bicycles and
-cars, tracked with constant velocity). The other points are segmented by mean-shift (B4) and split into feet (B5),
-and each segment becomes one detection. Without step 4 a car was cut into 0.4 m pieces, each tracked as a walker.
+clusters of all scanners within ``rigid_join_m`` of each other, and the beam-order clusters that come within that
+distance of them, form one rigid object each: a :class:`~fusiontrack.types.Detection` with feature ``"rigid"``
+(B18's bicycles and cars, tracked with constant velocity). The other points are segmented by mean-shift (B4) and
+split into feet (B5), and each segment becomes one detection. Without step 4 a car was cut into 0.4 m pieces, each
+tracked as a walker.
 
 Timing assumptions
 ------------------
@@ -41,6 +44,7 @@ import dataclasses
 import inspect
 import logging
 import math
+import numbers
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
@@ -82,7 +86,8 @@ def planar_pose(laser2world: Any, name: str = "laser2world") -> tuple[np.ndarray
 class _Scanner:
     """Mutable per-scanner state (the detector's, not shared)."""
 
-    __slots__ = ("background", "geometry", "points_m", "primed_ns", "rigid", "rotation", "t_ns", "translation")
+    __slots__ = ("background", "cluster", "geometry", "points_m", "primed_ns", "rigid", "rotation", "t_ns",
+                 "translation")
 
     def __init__(self, rotation: np.ndarray, translation: np.ndarray) -> None:
         self.rotation = rotation
@@ -92,6 +97,7 @@ class _Scanner:
         self.t_ns: int | None = None
         self.points_m = np.zeros((0, 2))
         self.rigid = np.zeros(0, np.int64)  # rigid cluster of each point in this scan, -1 for none
+        self.cluster = np.zeros(0, np.int64)  # beam-order cluster of each point, -1 for one alone
         self.primed_ns: int | None = None  # scans up to this time taught the background already (prime)
 
 
@@ -151,8 +157,8 @@ class LaserPeopleDetector:
         pieces, and each piece starts a walking track. On the outdoor leg_tracker bag (a robot following a person)
         MOTA was 0.81 without it against 0.90 with no rigid objects at all.
     rigid_join_m : float
-        Rigid clusters closer than this (0.5 m; from any scanner) are one object, and points closer than this to
-        a rigid cluster are part of it.
+        Rigid clusters closer than this (0.5 m; from any scanner) are one object, and a point closer than this to
+        a rigid cluster is part of it, with the rest of its beam-order cluster.
     max_age_s : float
         How far a scanner's latest scan may be from the time passed to :meth:`detect` (0.2 s).
     sensor : str
@@ -193,7 +199,7 @@ class LaserPeopleDetector:
         self.min_sigma_m = float(min_sigma_m)
         if not (math.isfinite(self.min_sigma_m) and self.min_sigma_m >= 0):
             raise ValueError(f"min_sigma_m: expected a finite value >= 0 m, got {min_sigma_m}")
-        if rigid_min_m is not None and not (isinstance(rigid_min_m, int | float) and not isinstance(rigid_min_m, bool)
+        if rigid_min_m is not None and not (isinstance(rigid_min_m, numbers.Real) and not isinstance(rigid_min_m, bool)
                                             and rigid_min_m > 0):
             raise ValueError(f"rigid_min_m: expected a length > 0 m (inf: none), or None, got {rigid_min_m!r}")
         if not (math.isfinite(rigid_join_m) and rigid_join_m >= 0):
@@ -268,7 +274,7 @@ class LaserPeopleDetector:
         keep_primed_backgrounds(self._scanners.values())
         for st in self._scanners.values():
             st.points_m = np.zeros((0, 2))
-            st.rigid = np.zeros(0, np.int64)
+            st.rigid = st.cluster = np.zeros(0, np.int64)
         self.dropped_scans = dict.fromkeys(self._scanners, 0)  # the tracking pass meets (and counts) them again
         return used
 
@@ -311,14 +317,14 @@ class LaserPeopleDetector:
         elif st.primed_ns is not None and scan.t_ns <= st.primed_ns and geometry != st.geometry:
             st.t_ns = scan.t_ns  # a scan from before a geometry change the priming went through: no points
             st.points_m = np.zeros((0, 2))
-            st.rigid = np.zeros(0, np.int64)
+            st.rigid = st.cluster = np.zeros(0, np.int64)
             return
         elif geometry != st.geometry:
             log.warning("laser %s: scan geometry changed from %s to %s (beams, angle_min, increment); "
                         "relearning its background", scan.sensor, st.geometry, geometry)
             st.background.reset(max(scan.n_beams, 1))
         st.geometry = geometry
-        st.t_ns = scan.t_ns
+        last_ns, st.t_ns = st.t_ns, scan.t_ns
         r = scan.valid_ranges_m()
         if st.primed_ns is not None and scan.t_ns <= st.primed_ns:  # already learnt from: classify only
             fg = st.background.foreground(r) if r.size else np.zeros(0, bool)
@@ -327,7 +333,7 @@ class LaserPeopleDetector:
             fg = st.background.update(r) if r.size else np.zeros(0, bool)
         if not fg.any():
             st.points_m = np.zeros((0, 2))
-            st.rigid = np.zeros(0, np.int64)
+            st.rigid = st.cluster = np.zeros(0, np.int64)
             return
         if self.min_cluster_points > 1:
             clusters = cluster_scan(np.where(fg, r, np.nan), scan.angle_min_rad, scan.angle_increment_rad,
@@ -337,25 +343,50 @@ class LaserPeopleDetector:
             keep = np.flatnonzero(fg & np.isfinite(r) & (r > 0))
         a = scan.angle_min_rad + keep * scan.angle_increment_rad
         local = np.column_stack([r[keep] * np.cos(a), r[keep] * np.sin(a)])
-        prev = st.points_m[st.rigid >= 0] if st.rigid.size == len(st.points_m) and st.rigid.size else None
-        st.points_m = local @ st.rotation.T + st.translation
-        st.rigid = self._rigid_clusters(r, keep, local, scan, prev, st.rotation, st.translation)
+        # the previous scan's rigid points, for the hysteresis: only if that scan is recent
+        recent = last_ns is not None and scan.t_ns - last_ns <= self._max_age_ns
+        prev = st.points_m[st.rigid >= 0] if recent and st.rigid.size else None
+        world = local @ st.rotation.T + st.translation
+        rigid, cluster = self._rigid_clusters(r, keep, local, world, scan, prev)
+        st.points_m, st.rigid, st.cluster = world, rigid, cluster
 
-    def _rigid_clusters(self, r: np.ndarray, keep: np.ndarray, local: np.ndarray, scan: LaserScan,
-                        prev: np.ndarray | None, rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
-        """Rigid cluster of each kept beam (``keep``: beam indices, ``local``: their points), ``-1`` for none;
-        ``prev``: the rigid points of the scanner's previous scan, world frame."""
+    def _rigid_clusters(self, r: np.ndarray, keep: np.ndarray, local: np.ndarray, world: np.ndarray,
+                        scan: LaserScan, prev: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Rigid cluster of each kept beam (``keep``: beam indices; ``local``, ``world``: their points in the
+        sensor and world frames), ``-1`` for none, and its beam-order cluster (``-1`` for a beam alone); ``prev``:
+        the rigid points of the scanner's previous scan, world frame, or None."""
         out = np.full(keep.size, -1, np.int64)
         if self.rigid_min_m is None or keep.size < 2:
-            return out
+            return out, out
         on = np.full(r.size, np.nan)
         on[keep] = r[keep]
+        # A beam without a return (glass, dark paint) must not cut a side in two: up to _BRIDGE_BEAMS invalid
+        # beams between two kept ones are filled by interpolation (for the clustering only; they are no points)
+        # where the side runs on smoothly: the range on each side of the hole, extrapolated from the beam before,
+        # lands within _BRIDGE_M of the other (legs of two people have a step in range there).
+        invalid = np.flatnonzero(~np.isfinite(r) | (r <= 0))
+        if invalid.size:
+            kept = np.zeros(r.size + 1, bool)  # (one past the end: never kept)
+            kept[keep] = True
+            pos = np.searchsorted(keep, invalid)
+            before, after = keep[np.maximum(pos - 1, 0)], keep[np.minimum(pos, keep.size - 1)]
+            valid_before = np.cumsum(np.isfinite(r) & (r > 0))  # valid beams up to each index
+            fill = ((pos > 0) & (pos < keep.size) & (after - before <= _BRIDGE_BEAMS + 1)
+                    & (valid_before[np.maximum(after - 1, 0)] == valid_before[before])
+                    & kept[np.maximum(before - 1, 0)] & (before > 0) & kept[np.minimum(after + 1, r.size)])
+            if fill.any():
+                i, b, a = invalid[fill], before[fill], after[fill]
+                rb, ra, rb1, ra1 = r[b], r[a], r[b - 1], r[np.minimum(a + 1, r.size - 1)]
+                smooth = ((np.abs(rb + (rb - rb1) * (a - b) - ra) <= _BRIDGE_M)
+                          & (np.abs(ra + (ra - ra1) * (a - b) - rb) <= _BRIDGE_M))
+                i, b, a = i[smooth], b[smooth], a[smooth]
+                on[i] = r[b] + (r[a] - r[b]) * (i - b) / (a - b)
         labels = segment_scan(on, scan.angle_min_rad, scan.angle_increment_rad, c0_m=self.c0_m, n_min=2,
                               grazing_deg=self.rigid_grazing_deg)[0][keep]
         # clusters are beam-order runs: the first and last kept point of each
         runs = np.flatnonzero(labels >= 0)
         if runs.size == 0:
-            return out
+            return out, labels
         lab = labels[runs]
         new_cluster = np.r_[True, lab[1:] != lab[:-1]]
         first = runs[new_cluster]
@@ -370,17 +401,16 @@ class LaserPeopleDetector:
         kept = np.flatnonzero(piece & ~long & (chord >= min(self.rigid_keep_m, self.rigid_min_m)))
         if kept.size and prev is not None and len(prev):
             # hysteresis: near the rigid points of the scanner's previous scan (world frame)
-            world = local @ rotation.T + translation
             d, _ = cKDTree(prev).query(world[runs], distance_upper_bound=self.rigid_join_m)
             near = np.zeros(int(lab.max()) + 1, bool)
             near[lab[np.isfinite(d)]] = True
             long[kept] = near[labels[first[kept]]]
         if not long.any():
-            return out
+            return out, labels
         new = np.full(int(lab.max()) + 1, -1, np.int64)
         new[labels[first[long]]] = np.arange(int(long.sum()))
         out[runs] = new[lab]
-        return out
+        return out, labels
 
     # ---------------------------------------------------------------------------------------------
     def foreground_points(self, t_ns: int) -> tuple[np.ndarray, np.ndarray]:
@@ -393,38 +423,45 @@ class LaserPeopleDetector:
         scanner : (n,) int64
             Index into :attr:`scanners` of the scanner each point came from.
         """
-        points, owner, _ = self._pooled(t_ns)
+        points, owner, _, _ = self._pooled(t_ns)
         return points, owner
 
-    def _pooled(self, t_ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`foreground_points` and each point's rigid cluster, numbered across scanners (-1: none)."""
-        parts, owner, rigid = [], [], []
-        n_rigid = 0
+    def _pooled(self, t_ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`foreground_points` and each point's rigid cluster and beam-order cluster, each numbered across
+        scanners (-1: none)."""
+        parts, owner, rigid, cluster = [], [], [], []
+        n_rigid = n_cluster = 0
         for i, st in enumerate(self._scanners.values()):
             if st.t_ns is not None and abs(int(t_ns) - st.t_ns) <= self._max_age_ns and len(st.points_m):
                 parts.append(st.points_m)
                 owner.append(np.full(len(st.points_m), i, dtype=np.int64))
                 rigid.append(np.where(st.rigid >= 0, st.rigid + n_rigid, -1))
+                cluster.append(np.where(st.cluster >= 0, st.cluster + n_cluster, -1))
                 n_rigid += int(st.rigid.max()) + 1 if st.rigid.size else 0
+                n_cluster += int(st.cluster.max()) + 1 if st.cluster.size else 0
         if not parts:
-            return np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0, np.int64)
-        return np.concatenate(parts), np.concatenate(owner), np.concatenate(rigid)
+            return np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return np.concatenate(parts), np.concatenate(owner), np.concatenate(rigid), np.concatenate(cluster)
 
-    def rigid_objects(self, points_m: np.ndarray, rigid: np.ndarray) -> tuple[np.ndarray, int]:
+    def rigid_objects(self, points_m: np.ndarray, rigid: np.ndarray,
+                      cluster: np.ndarray | None = None) -> tuple[np.ndarray, int]:
         """The rigid objects of pooled points: rigid clusters (``rigid``, per point, -1 for none) closer than
-        ``rigid_join_m`` are one, and points closer than that to one join it. Returns each point's object (-1 for
-        none; objects numbered from 0) and their number."""
+        ``rigid_join_m`` are one (measured between points thinned to one per 0.1 m cell), and a point closer than
+        that to one joins it, with the rest of its beam-order cluster (``cluster``, per point, -1 for a point
+        alone). Returns each point's object (-1 for none; objects numbered from 0) and their number."""
         on = np.flatnonzero(rigid >= 0)
         out = np.full(len(points_m), -1, np.int64)
         if on.size == 0:
             return out, 0
         lab = np.unique(rigid[on], return_inverse=True)[1].reshape(-1)
         k = int(lab.max()) + 1
-        tree = cKDTree(points_m[on])
         comp = np.arange(k)
         if k > 1 and self.rigid_join_m > 0:
-            pairs = tree.query_pairs(self.rigid_join_m, output_type="ndarray")
-            a, b = lab[pairs[:, 0]], lab[pairs[:, 1]]
+            # one point per cluster and 0.1 m cell: a car's side near a scanner has hundreds of points
+            cell = np.floor(points_m[on] / _JOIN_CELL_M).astype(np.int64)
+            _, pick = np.unique(np.column_stack([lab, cell]), axis=0, return_index=True)
+            pairs = cKDTree(points_m[on[pick]]).query_pairs(self.rigid_join_m, output_type="ndarray")
+            a, b = lab[pick[pairs[:, 0]]], lab[pick[pairs[:, 1]]]
             other = a != b
             if other.any():
                 graph = coo_matrix((np.ones(int(other.sum())), (a[other], b[other])), shape=(k, k))
@@ -432,9 +469,19 @@ class LaserPeopleDetector:
         out[on] = comp[lab]
         loose = np.flatnonzero(rigid < 0)
         if loose.size and self.rigid_join_m > 0:
-            d, i = tree.query(points_m[loose], distance_upper_bound=self.rigid_join_m)
+            d, i = cKDTree(points_m[on]).query(points_m[loose], distance_upper_bound=self.rigid_join_m)
             near = np.isfinite(d)
             out[loose[near]] = comp[lab[i[near]]]
+            if cluster is not None and near.any():
+                # the rest of each touched beam-order cluster comes along (not half a piece of a car)
+                whole = cluster[loose[near]]
+                obj = out[loose[near]]
+                touched = whole >= 0
+                if touched.any():
+                    of = dict(zip(whole[touched].tolist(), obj[touched].tolist(), strict=True))
+                    rest = loose[~near]
+                    rest = rest[np.isin(cluster[rest], whole[touched])]
+                    out[rest] = [of[c] for c in cluster[rest].tolist()]
         return out, k
 
     def objects(self, t_ns: int) -> tuple[np.ndarray, Segments, np.ndarray, int]:
@@ -442,8 +489,8 @@ class LaserPeopleDetector:
         :meth:`foreground_points`), the two-feet :class:`Segments` of the points that are not part of a rigid
         object (``labels`` and ``foot`` over all ``n`` points, ``-1`` on the rigid objects'), and each point's
         rigid object (``-1`` for none) with their number."""
-        points, _, rigid = self._pooled(t_ns)
-        obj, k = self.rigid_objects(points, rigid)
+        points, _, rigid, cluster = self._pooled(t_ns)
+        obj, k = self.rigid_objects(points, rigid, cluster)
         if k == 0:
             return points, self.segment(points), obj, 0
         free = np.flatnonzero(obj < 0)
@@ -504,13 +551,18 @@ class LaserPeopleDetector:
             for g in groups:
                 # the centre of the smallest rectangle around the points: the vehicle's centre when its sides are
                 # seen all round, not pulled towards the nearer scanner's denser points as the mean is
-                c = np.asarray(cv2.minAreaRect(g.astype(np.float32))[0], np.float64) if len(g) >= 3 else g.mean(0)
+                m = g.mean(axis=0)  # (about the mean: float32 world coordinates far from the origin are coarse)
+                c = m + np.asarray(cv2.minAreaRect((g - m).astype(np.float32))[0]) if len(g) >= 3 else m
                 d = g - c
                 out.append(Detection(t_ns, self.sensor, position_m=c, covariance_m2=d.T @ d / len(g) + eye,
                                      features={"feet_m": np.stack([c, c]), "points_m": g, "inter_feet_m": zero,
                                                "one_foot": one, "mode_m": c, "rigid": yes}))
         return out
 
+
+_BRIDGE_BEAMS = 2  # invalid beams bridged inside a rigid object's side
+_BRIDGE_M = 0.1  # where the ranges on each side of them run on smoothly to within this
+_JOIN_CELL_M = 0.1  # rigid points are thinned to one per cell of this size to find the clusters that join
 
 _BACKGROUND_ARGS = ("alpha", "beta", "gamma", "tau_fg_m", "n_init", "init", "bin_m")
 

@@ -96,9 +96,11 @@ def windows_from_observations(obs: Sequence[tuple[Any, int, str, np.ndarray, np.
 def _frames(path: str | Path, *, background: str = "learn", time_source: str = "header",
             detector_params: dict[str, Any] | None = None,
             ) -> Iterator[tuple[int, np.ndarray, Callable[[], Segments]]]:
-    """(t_ns, pooled foreground points (n, 2) in the world, their segments) per scan time, as the tracker's
-    detector sees them. The segments: a function giving the detector's two-feet segments of those points (B4,
-    :class:`~fusiontrack.laser.clustering.Segments`; the mean-shift runs only when it is called)."""
+    """(t_ns, pooled foreground points (n, 2) in the world, their segments) per scan time, from the tracker's
+    detector. The segments: a function giving the detector's two-feet segments of all those points (B4,
+    :class:`~fusiontrack.laser.clustering.Segments`; the mean-shift runs only when it is called). The tracker's
+    detector first takes out its rigid objects (vehicles' sides); the people's segments kept for training hold
+    no vehicle's points, so this does not change them."""
     from fusiontrack.io.recording import LASERSCAN, Recording
     from fusiontrack.io.sync import synchronize
     from fusiontrack.laser.detector import detector_for_recording
@@ -134,8 +136,8 @@ def simulated_windows(path: str | Path, *, window: int = 10, stride: int = 5, se
     segment that holds a person and a foot of a neighbour, or two people side by side whose second has no
     track, is half a metre wide or more: trained on people's own points alone, the classifier called such
     windows ``car``, and tracks of people walking in pairs left the person class for seconds. Vehicles'
-    segments are not added: the 0.4 m mean-shift cuts a car into pieces, which the people tracker does not
-    follow as one target anyway.
+    segments are not added: the tracker's detector keeps a vehicle's side whole (a rigid object, which the
+    whole-object samples stand for) instead of cutting it into two-feet segments.
     """
     from fusiontrack.io.recording import Recording
 

@@ -53,10 +53,6 @@ class CVKalmanTracker:
         Only used to name births and deaths (``appear``/``disappear`` on the edge).
     d_edge_m : float
     sensor : str
-    fragments : bool
-        Pieces of one object: a detection left over by the assignment but within ``gate_m`` of a track is part of
-        the nearest such track, whose measurement is then the mean of its detections' centres weighted by their
-        points (feature ``"points_m"``); it starts no track. For vehicles, whose sides two scanners see apart.
     cls : str
         The class of the states (``person``; the vehicles of :class:`~fusiontrack.tracking.tracker.
         LaserPeopleTracker`: ``unknown`` until a classifier gives them theirs).
@@ -67,8 +63,8 @@ class CVKalmanTracker:
 
     def __init__(self, *, q: float = 2.0, r_m: float = 0.05, gate_m: float = 0.8, n_confirm: int = 3,
                  n_miss: int = 25, frame_s: float = 0.04, candidate_gate_m: float = 0.5, candidate_gap_s: float = 0.25,
-                 area_m: Any = None, d_edge_m: float = 0.5, sensor: str = "laser", fragments: bool = False,
-                 cls: str = "person", ids: Iterator[int] | None = None) -> None:
+                 area_m: Any = None, d_edge_m: float = 0.5, sensor: str = "laser", cls: str = "person",
+                 ids: Iterator[int] | None = None) -> None:
         for name, v in (("q", q), ("r_m", r_m), ("gate_m", gate_m), ("frame_s", frame_s),
                         ("candidate_gate_m", candidate_gate_m), ("candidate_gap_s", candidate_gap_s)):
             if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
@@ -81,7 +77,6 @@ class CVKalmanTracker:
         self.area_m = area_polygon(area_m)
         self.d_edge_m = float(d_edge_m)
         self.sensor = str(sensor)
-        self.fragments = bool(fragments)
         self.cls = str(ObjectClass(cls))
         self.events: list[Event] = []
         self.dropped_steps = 0
@@ -129,19 +124,6 @@ class CVKalmanTracker:
             pairs, _, _ = hungarian(cost, gate=self.gate_m)
             meas[pairs[:, 0]] = z[pairs[:, 1]]
             taken[pairs[:, 1]] = True
-            if self.fragments and not taken.all() and pairs.size:
-                near = np.flatnonzero(~taken)
-                row = cost[:, near].argmin(axis=0)
-                ok = cost[row, near] <= self.gate_m
-                if ok.any():
-                    owner = np.concatenate([pairs[:, 0], row[ok]])
-                    dets = np.concatenate([pairs[:, 1], near[ok]])
-                    w = np.array([max(len(detections[j].features.get("points_m", ())), 1) for j in dets], float)
-                    total = np.bincount(owner, w, n)
-                    for c in (0, 1):
-                        meas[:, c] = np.where(total > 0, np.bincount(owner, w * z[dets, c], n)
-                                              / np.maximum(total, 1e-12), meas[:, c])
-                    taken[near[ok]] = True
         updated = ~np.isnan(meas[:, 0])
         if updated.any():
             self._x, self._P = kalman.update(self._x, self._P, meas, R=self.r_m**2)

@@ -32,7 +32,7 @@ The step follows ARCHITECTURE.md's "Tracker step" (ALGORITHMS.md sections in bra
    pre-merge T, S and ψ (members left over stay merged). A merged target whose segments show at most two
    leg blobs for ``single_s`` seconds holds one person: the member nearest to it goes on, the others end;
 6. **vehicles** — the detector's rigid objects (feature ``"rigid"``: the whole side of a bicycle or a car) are
-   not walkers: they go to constant-velocity Kalman filters on their centroid (B18, X5;
+   not walkers: they go to constant-velocity Kalman filters on their position (B18, X5;
    :class:`~fusiontrack.tracking.baseline.CVKalmanTracker` with ``vehicle_*`` parameters), in the same id space,
    never merged with people. (Walking particle filters cannot follow them: the walking model's top speed is
    S / T = 2.5 m/s, a bicycle's 4 m/s and a car's 8 m/s);
@@ -303,22 +303,23 @@ class TrackerParams:
         the edge and confirms it by a later sighting anywhere [RECON]. 0 forgets glimpses.
     vehicles : bool
         Track the detector's rigid objects (detections with feature ``"rigid"``: bicycles and cars, B18) with
-        constant-velocity Kalman filters (X5) on their centroid, apart from the walking people; their tracks share
+        constant-velocity Kalman filters (X5) on their position, apart from the walking people; their tracks share
         the id space and the events. False: rigid objects are detections like any other (walking model).
     vehicle_q : float
         X5's ``q`` of those filters, m²/s³ (B18: 1 for cars, 0.5 for bicycles; one filter for both, as the class
         is known only after a window of frames).
     vehicle_sigma_m : float
-        σ of a rigid object's centroid (B18: 0.15 m).
+        σ of a rigid object's position (B18: 0.15 m; the detector gives the centre of the smallest rectangle
+        around its points).
     vehicle_gate_m : float
-        Largest distance of a vehicle track to its detection (2 m: the centroid of the visible sides moves
+        Largest distance of a vehicle track to its detection (2 m: the centre of the visible sides moves
         along the vehicle as it passes a scanner).
     vehicle_candidate_gate_m : float
         As ``candidate_gate_m``, for new vehicle tracks (1 m: 8 m/s is 0.32 m a frame).
     vehicle_n_confirm : int
-        Frames a rigid object must be seen to start a vehicle track (10, 0.4 s). Two or three people abreast
-        whose legs the scan strings together make a rigid object now and then (6 detections in 3000 frames of
-        each 60 s simulated crowd, seeds 0-2), in bursts of at most 4 frames.
+        Frames a rigid object must be seen to start a vehicle track (10, 0.4 s): people whose legs a scan strings
+        together can make a rigid object for a frame or two (2 detections in the 9000 frames of the 60 s simulated
+        crowds, seeds 0-2; without the detector's one-piece test, 26 in bursts of up to 6 frames).
     vehicle_n_miss : int
         Frames a vehicle track coasts without a detection (25).
     sensor : str
@@ -935,6 +936,7 @@ class LaserPeopleTracker:
         self._split_scores = split_scores
         self._next_id = itertools.count(1)
         self._vehicles: Any = None
+        self._vehicle_ids: set[int] = set()
         if p.vehicles:
             from .baseline import CVKalmanTracker
 
@@ -942,7 +944,7 @@ class LaserPeopleTracker:
                                              n_confirm=p.vehicle_n_confirm, n_miss=p.vehicle_n_miss, frame_s=p.frame_s,
                                              candidate_gate_m=p.vehicle_candidate_gate_m,
                                              candidate_gap_s=p.candidate_gap_s, d_edge_m=p.d_edge_m,
-                                             sensor=p.sensor, fragments=True, ids=self._next_id,
+                                             sensor=p.sensor, ids=self._next_id,
                                              cls=str(ObjectClass.UNKNOWN))
         self.area_m = area_m
         self.rng = _rng(rng)
@@ -997,6 +999,11 @@ class LaserPeopleTracker:
     def n_targets(self) -> int:
         """Live targets: walking targets plus the members of merged targets (not the vehicles)."""
         return int(self._id.size) + sum(len(m.info) for m in self._merged)
+
+    @property
+    def vehicle_ids(self) -> frozenset[int]:
+        """Every id given so far to a vehicle track (a rigid object's, constant velocity), ended ones too."""
+        return frozenset(self._vehicle_ids)
 
     @property
     def n_vehicles(self) -> int:
@@ -1057,7 +1064,9 @@ class LaserPeopleTracker:
         self._predict(dt)
         states = self._update(t_ns, dt, det)
         if self._vehicles is not None and (rigid or not self._vehicles.idle):
-            states.extend(self._vehicles.step(t_ns, rigid))
+            cars = self._vehicles.step(t_ns, rigid)
+            self._vehicle_ids.update(s.track_id for s in cars)
+            states.extend(cars)
             self.events.extend(self._vehicles.events)
         return states
 
