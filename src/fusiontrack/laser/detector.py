@@ -366,14 +366,17 @@ class LaserPeopleDetector:
         # lands within _BRIDGE_M of the other (legs of two people have a step in range there).
         invalid = np.flatnonzero(~np.isfinite(r) | (r <= 0))
         if invalid.size:
-            kept = np.zeros(r.size + 1, bool)  # (one past the end: never kept)
+            kept = np.zeros(r.size + 3, bool)  # (past the end, and index -1 and -2: never kept)
             kept[keep] = True
+            # only holes with a kept beam within two on each side (most invalid beams see nothing at all)
+            invalid = invalid[(kept[invalid - 1] | kept[invalid - 2]) & (kept[invalid + 1] | kept[invalid + 2])]
+        if invalid.size:
             pos = np.searchsorted(keep, invalid)
             before, after = keep[np.maximum(pos - 1, 0)], keep[np.minimum(pos, keep.size - 1)]
             valid_before = np.cumsum(np.isfinite(r) & (r > 0))  # valid beams up to each index
             fill = ((pos > 0) & (pos < keep.size) & (after - before <= _BRIDGE_BEAMS + 1)
                     & (valid_before[np.maximum(after - 1, 0)] == valid_before[before])
-                    & kept[np.maximum(before - 1, 0)] & (before > 0) & kept[np.minimum(after + 1, r.size)])
+                    & kept[before - 1] & (before > 0) & kept[after + 1])
             if fill.any():
                 i, b, a = invalid[fill], before[fill], after[fill]
                 rb, ra, rb1, ra1 = r[b], r[a], r[b - 1], r[np.minimum(a + 1, r.size - 1)]
