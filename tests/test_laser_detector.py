@@ -343,6 +343,10 @@ def test_legs_strung_together_in_depth_are_not_a_rigid_object() -> None:
     holes = side.copy()
     holes[[8, 20, 21, 30]] = [np.nan, np.inf, 0.0, np.nan]
     assert objects(holes) == [(True, 36)]
+    # a piece beside the side, a step of 0.2 m in range away (a mirror, a corner): not bridged, but it touches the
+    # side, so all of it goes with the side, not only its points within rigid_join_m
+    piece = np.r_[side[:30], np.nan, np.linspace(16.1, 16.3, 8)]
+    assert objects(piece) == [(True, 38)]
 
 
 def test_a_rigid_objects_centre_is_exact_far_from_the_origin() -> None:

@@ -478,13 +478,12 @@ class LaserPeopleDetector:
             if cluster is not None and near.any():
                 # the rest of each touched beam-order cluster comes along (not half a piece of a car)
                 whole = cluster[loose[near]]
-                obj = out[loose[near]]
                 touched = whole >= 0
                 if touched.any():
-                    of = dict(zip(whole[touched].tolist(), obj[touched].tolist(), strict=True))
+                    of = np.full(int(cluster.max()) + 2, -1, np.int64)  # (its last entry, for cluster -1, stays -1)
+                    of[whole[touched]] = out[loose[near]][touched]
                     rest = loose[~near]
-                    rest = rest[np.isin(cluster[rest], whole[touched])]
-                    out[rest] = [of[c] for c in cluster[rest].tolist()]
+                    out[rest] = of[cluster[rest]]
         return out, k
 
     def objects(self, t_ns: int) -> tuple[np.ndarray, Segments, np.ndarray, int]:
