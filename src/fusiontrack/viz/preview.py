@@ -20,7 +20,7 @@ from ..errors import ConfigError, RecordingError
 from ..geometry import TransformTree, scan_to_points, transform_points
 from ..io.recording import Recording
 from ..io.video import check_video_output, write_video
-from ..types import GroundTruth, Image, LaserScan, TrackState, Transform
+from ..types import GroundTruth, Image, LaserScan, ObjectClass, TrackState, Transform
 from .birdseye import BirdseyeView
 
 log = logging.getLogger(__name__)
@@ -171,6 +171,9 @@ def _frames(stream: Iterator, primary: str, laser_topics: list[str], tree: Trans
             return
 
 
+_UNNAMED = (str(ObjectClass.PERSON), str(ObjectClass.UNKNOWN))
+
+
 def _compose(view: BirdseyeView, background: np.ndarray, scans: dict[str, np.ndarray], lasers: list[str],
              truth: GroundTruth | None, tree: TransformTree, image: Image | None, height_px: int,
              t_s: float, trails: list[list[TrackState]] | None = None) -> np.ndarray:
@@ -197,7 +200,9 @@ def _compose(view: BirdseyeView, background: np.ndarray, scans: dict[str, np.nda
         cv2.polylines(img, [uv.astype(np.int32).reshape(-1, 1, 2)], False, colour, 1, cv2.LINE_AA)
         u, v = int(uv[-1, 0]), int(uv[-1, 1])
         cv2.rectangle(img, (u - 4, v - 4), (u + 4, v + 4), colour, -1)
-        cv2.putText(img, f"T{trail[-1].track_id}", (u + 6, v + 12), cv2.FONT_HERSHEY_SIMPLEX, 0.4, colour, 1,
+        last = trail[-1]
+        kind = "" if last.cls in _UNNAMED else f" {last.cls}"  # people are the rule; vehicles are named
+        cv2.putText(img, f"T{last.track_id}{kind}", (u + 6, v + 12), cv2.FONT_HERSHEY_SIMPLEX, 0.4, colour, 1,
                     cv2.LINE_AA)
     view.label(img, f"{t_s:7.2f} s")
     if image is None:
