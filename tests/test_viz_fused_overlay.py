@@ -23,11 +23,13 @@ from fusiontrack.sim.scenario import load_scenario
 from fusiontrack.types import CameraInfo, Event, GroundTruth, LaserScan, TrackState
 from fusiontrack.vision.people import camera_from_recording
 from fusiontrack.viz.fused_overlay import (
+    VEHICLE_SIZE_M,
     bias_at,
     laser_points_world,
     person_boxes,
     project_points,
     render_fused_overlay,
+    vehicle_boxes,
 )
 
 YAW_ERROR_DEG = 3.0  # the real camera is turned this much from its calibration; the learnt bias is +3 deg
@@ -139,6 +141,62 @@ def test_person_cylinder_boxes_through_the_corrected_camera_cover_the_true_boxes
     assert len(iou[0.0]) > 40
     assert right > 0.5
     assert right > wrong + 0.2
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    lo, hi = np.maximum(a[:, :2], b[:, :2]), np.minimum(a[:, 2:], b[:, 2:])
+    inter = np.clip(hi - lo, 0, None).prod(axis=1)
+    return inter / ((a[:, 2:] - a[:, :2]).prod(axis=1) + (b[:, 2:] - b[:, :2]).prod(axis=1) - inter)
+
+
+def test_a_vehicle_track_is_drawn_as_its_cuboid_and_covers_the_true_box(simulated):
+    """Against the simulator's true image boxes of the cars and bicycles of a road (fully visible, inside the
+    image): the cuboid of the class's size along the velocity covers them; a person's cylinder would not."""
+    path = simulated("road", seconds=16.0, seed=0)  # the traffic pipeline tests' recording
+    with Recording(path) as rec:
+        gt = {g.t_ns: g for g in rec.messages(["/ground_truth"]) if isinstance(g, GroundTruth)}
+        frames = [f for f in rec.messages(["/ground_truth/camera_0"]) if isinstance(f, GroundTruth)]
+        cam = camera_from_recording(rec, "camera_0", "camera_0")
+    gt_t = np.array(sorted(gt))
+    iou: dict[str, list[float]] = {"class size": [], "true size": [], "person": []}
+    for f in frames[::2]:
+        g = gt[gt_t[np.argmin(np.abs(gt_t - int(f.attributes["t_true_ns"][0])))]] if len(f) else None
+        box = np.asarray(f.attributes["box_px"], float).reshape(-1, 4)
+        vis = np.asarray(f.attributes["visibility"], float)
+        for k, agent in enumerate(f.ids):
+            j = np.flatnonzero(g.ids == agent) if g is not None else []
+            inside = np.isfinite(box[k]).all() and box[k, 0] >= 0 and box[k, 1] >= 0 and box[k, 2] <= cam.width \
+                and box[k, 3] <= cam.height
+            if len(j) != 1 or g.classes[j[0]] == "person" or vis[k] < 0.95 or not inside:
+                continue
+            pos, vel, cls = g.positions_m[j[0]], g.velocities_mps[j[0]], g.classes[j[0]]
+            size = np.asarray(g.attributes["size_m"])[j[0]]
+            iou["class size"].append(_iou(vehicle_boxes(cam, pos, vel, VEHICLE_SIZE_M[cls]), box[k:k + 1])[0])
+            iou["true size"].append(_iou(vehicle_boxes(cam, pos, vel, size), box[k:k + 1])[0])
+            iou["person"].append(_iou(person_boxes(cam, pos[None]), box[k:k + 1])[0])
+    assert len(iou["class size"]) > 100
+    assert np.median(iou["true size"]) > 0.95
+    assert np.min(iou["true size"]) > 0.8
+    assert np.median(iou["class size"]) > 0.85
+    assert np.min(iou["class size"]) > 0.7
+    assert np.median(iou["person"]) < 0.3
+
+
+def test_vehicle_boxes_heading_standstill_and_bad_input(crowd):
+    cam = crowd["camera"]
+    ahead = cam.cam2world[:2, 3] + 12.0 * cam.cam2world[:2, 2] / np.linalg.norm(cam.cam2world[:2, 2])
+    size = (4.5, 1.8, 1.5)
+    across = cam.cam2world[:2, 0]  # the image's u axis on the floor: a car driving across the view is wide
+    wide = vehicle_boxes(cam, ahead, 10.0 * across, size)[0]
+    deep = vehicle_boxes(cam, ahead, 10.0 * cam.cam2world[:2, 2], size)[0]
+    assert wide[2] - wide[0] > 1.5 * (deep[2] - deep[0])
+    # standing still (heading unknown): along the world's x axis, as any velocity along x
+    assert np.allclose(vehicle_boxes(cam, ahead, (0.1, 0.0), size), vehicle_boxes(cam, ahead, (5.0, 0.0), size))
+    behind = cam.cam2world[:2, 3] - 12.0 * cam.cam2world[:2, 2] / np.linalg.norm(cam.cam2world[:2, 2])
+    assert np.isnan(vehicle_boxes(cam, [behind, [np.nan, 0.0]], np.zeros((2, 2)), [size, size])).all()
+    assert vehicle_boxes(cam, np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 3))).shape == (0, 4)
+    with pytest.raises(ValueError, match="sizes_m"):
+        vehicle_boxes(cam, [ahead, ahead], np.zeros((2, 2)), [size])
 
 
 def test_bias_at_is_the_value_at_or_before_and_zero_before_the_first_update():

@@ -11,7 +11,8 @@ One output frame per image of the camera, the image itself underneath:
   leg returns sit on the people's legs; with a yaw error they sit beside them.
 * **tracks** — the states nearest in time (within half a scan period), each as its box (its ``box_px`` when
   the state has one in this camera, else the image box of a person cylinder standing at ``position_m``,
-  :func:`person_boxes`), its id in :func:`~fusiontrack.vision.overlay.id_colour` (drawn by
+  :func:`person_boxes`, or for a track classed ``car`` or ``bicycle`` that of a car- or bicycle-sized cuboid
+  along its velocity, :func:`vehicle_boxes`), its id in :func:`~fusiontrack.vision.overlay.id_colour` (drawn by
   :func:`~fusiontrack.vision.overlay.draw_overlay`: thick while a sensor confirms it, thin and starred while it
   coasts or is merged), and its situation and confirming sensors under the box (``L`` laser, ``C`` camera).
 * **text** — top right: the bias (``bias 2.93 deg (settled)``; ``learning`` while it is being learnt, ``live`` for
@@ -40,12 +41,22 @@ from ..errors import ConfigError, RecordingError
 from ..geometry import PinholeCamera, scan_to_points, transform_points
 from ..io.recording import LASERSCAN, Recording
 from ..io.video import write_video
-from ..types import Event, Image, LaserScan, Situation, TrackState
+from ..types import Event, Image, LaserScan, ObjectClass, Situation, TrackState
 from ..vision.overlay import draw_overlay, id_colour
+from ..vision.vehicles import VehicleDetectorParams
 from .preview import LASER_COLOURS, _transform_tree
 
-__all__ = ["FusedOverlayResult", "ProjectedPoints", "bias_at", "laser_points_world", "person_boxes",
-           "project_points", "render_fused_overlay"]
+__all__ = [
+    "VEHICLE_SIZE_M",
+    "FusedOverlayResult",
+    "ProjectedPoints",
+    "bias_at",
+    "laser_points_world",
+    "person_boxes",
+    "project_points",
+    "render_fused_overlay",
+    "vehicle_boxes",
+]
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +65,10 @@ PERSON_RADIUS_M = 0.25
 """Radius of the person cylinder drawn for a track without an image box (0.5 m wide)."""
 PERSON_HEIGHT_M = 1.75
 """Height of that cylinder."""
+VEHICLE_SIZE_M = {str(ObjectClass.CAR): VehicleDetectorParams().car_size_m,
+                  str(ObjectClass.BICYCLE): VehicleDetectorParams().bicycle_size_m}
+"""Length, width and height of the cuboid drawn for a track of each vehicle class (the camera vehicle pipeline's
+size priors, :class:`~fusiontrack.vision.vehicles.VehicleDetectorParams`)."""
 SITUATION_TEXT = {str(Situation.NONCORRELATED): "free", str(Situation.CORRELATED): "close",
                   str(Situation.MERGED): "merged", str(Situation.APPEARING): "new",
                   str(Situation.DISAPPEARING): "leaving"}
@@ -187,6 +202,52 @@ def person_boxes(camera: PinholeCamera, positions_m: Any, *, radius_m: float = P
     xy = np.repeat(pos[:, None, :] + ring[None], 2, axis=1)  # (n, 2k, 2): bottom rim then top rim
     z = np.repeat(np.array([0.0, height_m]), n_sides)[None, :].repeat(n, axis=0)  # (n, 2k)
     uv = camera.project(np.concatenate([xy, z[..., None]], axis=2).reshape(-1, 3)).reshape(n, 2 * n_sides, 2)
+    ok = np.all(np.isfinite(uv), axis=(1, 2))
+    out = np.full((n, 4), np.nan)
+    out[ok] = np.concatenate([uv[ok].min(axis=1), uv[ok].max(axis=1)], axis=1)
+    return out
+
+
+def vehicle_boxes(camera: PinholeCamera, positions_m: Any, velocities_mps: Any, sizes_m: Any,
+                  min_speed_mps: float = 0.5) -> np.ndarray:
+    """Image boxes of vehicle-sized cuboids standing at floor positions, each along its velocity.
+
+    The box is the bounding box of the cuboid's 8 projected corners. A vehicle slower than ``min_speed_mps``
+    (its heading unknown) is drawn along the world's x axis.
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+        The camera to draw in (already corrected by its bias).
+    positions_m, velocities_mps : (n, 2) float
+        Floor positions (the cuboid's centre) and velocities in the world.
+    sizes_m : (n, 3) float
+        Length (along the velocity), width and height.
+    min_speed_mps : float
+
+    Returns
+    -------
+    (n, 4) float64
+        ``(u_min, v_min, u_max, v_max)``; NaN rows for a position that is NaN or partly behind the camera.
+    """
+    pos = np.asarray(positions_m, dtype=np.float64).reshape(-1, 2)
+    vel = np.asarray(velocities_mps, dtype=np.float64).reshape(-1, 2)
+    size = np.asarray(sizes_m, dtype=np.float64).reshape(-1, 3)
+    n = len(pos)
+    if not (len(vel) == n and len(size) == n):
+        raise ValueError(f"velocities_mps, sizes_m: expected {n} rows each, got {len(vel)} and {len(size)}")
+    if n == 0:
+        return np.zeros((0, 4))
+    speed = np.hypot(vel[:, 0], vel[:, 1])
+    moving = speed >= min_speed_mps
+    u = np.where(moving[:, None], vel / np.where(moving, speed, 1.0)[:, None], [1.0, 0.0])  # along
+    v = np.column_stack([-u[:, 1], u[:, 0]])  # across
+    sl, sw = np.array([-0.5, 0.5, 0.5, -0.5]), np.array([-0.5, -0.5, 0.5, 0.5])
+    foot = (pos[:, None, :] + (sl[None, :, None] * size[:, 0, None, None]) * u[:, None, :]
+            + (sw[None, :, None] * size[:, 1, None, None]) * v[:, None, :])  # (n, 4, 2)
+    xy = np.concatenate([foot, foot], axis=1)  # (n, 8, 2): bottom then top
+    z = np.concatenate([np.zeros((n, 4)), np.repeat(size[:, 2:3], 4, axis=1)], axis=1)
+    uv = camera.project(np.concatenate([xy, z[..., None]], axis=2).reshape(-1, 3)).reshape(n, 8, 2)
     ok = np.all(np.isfinite(uv), axis=(1, 2))
     out = np.full((n, 4), np.nan)
     out[ok] = np.concatenate([uv[ok].min(axis=1), uv[ok].max(axis=1)], axis=1)
@@ -441,16 +502,21 @@ def _compose(image: Image, index: int, t0_ns: int, camera: PinholeCamera, bias: 
             colours = _RANGE_LUT[np.rint(255 * (1.0 - level)).astype(np.int64)]  # near red, far blue
         order = np.argsort(-proj.range_m, kind="stable")  # far first: near points drawn over them
         _draw_points(frame, proj.uv[order], colours[order], 1)
-    # track boxes: their own in this camera, else a person cylinder through the corrected camera
+    # track boxes: their own in this camera, else a person cylinder (a vehicle's cuboid) through the corrected
+    # camera
     boxes = np.full((len(states), 4), np.nan)
-    missing = []
+    people, vehicles = [], []
     for k, s in enumerate(states):
         if s.box_px is not None and s.camera == camera_name:
             boxes[k] = s.box_px
         else:
-            missing.append(k)
-    if missing:
-        boxes[missing] = person_boxes(cam, np.array([states[k].position_m for k in missing]))
+            (vehicles if s.cls in VEHICLE_SIZE_M else people).append(k)
+    if people:
+        boxes[people] = person_boxes(cam, np.array([states[k].position_m for k in people]))
+    if vehicles:
+        boxes[vehicles] = vehicle_boxes(cam, np.array([states[k].position_m for k in vehicles]),
+                                        np.array([states[k].velocity_mps for k in vehicles]),
+                                        np.array([VEHICLE_SIZE_M[states[k].cls] for k in vehicles]))
     hi_uv = np.array([cam.width - 1.0, cam.height - 1.0])
     with np.errstate(invalid="ignore"):
         clipped = np.concatenate([np.clip(boxes[:, :2], 0.0, hi_uv), np.clip(boxes[:, 2:], 0.0, hi_uv)], axis=1)
