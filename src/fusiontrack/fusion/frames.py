@@ -14,7 +14,9 @@ from collections.abc import Iterator
 from typing import Any
 
 from ..errors import RecordingError
-from ..io.ros import FROM_ROS
+from ..io.recording import IMAGE
+from ..io.ros import FROM_ROS, image_from_cdr_bytes
+from ..io.sync import with_time
 from ..types import Image
 
 __all__ = ["LazyFrames"]
@@ -102,8 +104,13 @@ class LazyFrames:
         conn, _, data = raw
         img: Image | None = None
         try:
-            msg = self._deser[id(conn)].deserialize(data, conn.msgtype)
-            out = FROM_ROS[conn.msgtype](msg, t_log, self.sensor, conn.topic)
+            # a ROS 2 raw image: its pixels a view of the bytes (as Recording.messages reads it), else deserialised
+            out = image_from_cdr_bytes(data, self.sensor) if conn.msgtype == IMAGE and not _is_ros1(conn) else None
+            if out is not None:
+                out = with_time(out, t_log)
+            else:
+                msg = self._deser[id(conn)].deserialize(data, conn.msgtype)
+                out = FROM_ROS[conn.msgtype](msg, t_log, self.sensor, conn.topic)
             img = out if isinstance(out, Image) and out.encoding in ("bgr8", "rgb8") else None
             if img is not None and img.encoding == "rgb8":
                 img = Image(img.t_ns, img.sensor, img.frame_id, img.pixels[..., ::-1], "bgr8")
