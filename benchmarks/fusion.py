@@ -167,9 +167,9 @@ def run_sim(name: str, seconds: float, seed: int, tmp: Path, bias: bool = True, 
         fused, _, stats = track_fused(path, tracker_params=SIM_PF, area_m=bounds, clock_corrections_ns=corrections,
                                       adaptive_bias=bias, frames_wrapper=_bias_clock(bias_cpu, t0))
         spent["fusion"].append(time.process_time() - t0)
-        # through the camera fusion used (corrected by the bias it learnt, if it settled): both get the same camera
-        corrected = stats.bias.corrected_camera if stats.bias is not None else "auto"
         if camera:
+            # through the camera fusion used (corrected by the bias it learnt, if it settled): both get the same one
+            corrected = stats.bias.corrected_camera if stats.bias is not None else "auto"
             t0 = time.process_time()
             camera_states, _, cam_stats = track_camera(path, camera=corrected)
             spent["camera"].append(time.process_time() - t0)
@@ -218,7 +218,8 @@ def main() -> None:
                                          camera=not args.skip_camera)
                    for name, secs in (("crowd", args.crowd_seconds), ("groups", args.groups_seconds))
                    for seed in args.seeds}
-    table = Table(title=f"seed 001: laser-only vs camera-only vs fusion (crowd {args.crowd_seconds:g} s, groups "
+    compared = " vs ".join(label for _, label in systems)
+    table = Table(title=f"seed 001: {compared} (crowd {args.crowd_seconds:g} s, groups "
                         f"{args.groups_seconds:g} s; match 0.5 m; ms per 25 Hz frame; fusion "
                         f"{'through the camera as calibrated' if args.no_bias else 'with the adaptive bias'})",
                   header_style="bold")
@@ -263,14 +264,14 @@ def main() -> None:
 
     use = Table(title="fusion: what the camera was used for (summed over seeds)", header_style="bold")
     for col in ("scenario", "laser steps", "images read", "training frames", "score maps", "splits",
-                "by appearance", "appearance overrode motion", "identity checks", "exchanged", "re-id claims",
-                "re-identified"):
+                "by appearance", "appearance overrode motion", "identity checks", "exchanged", "withheld",
+                "re-id claims", "re-identified"):
         use.add_column(col, justify="left" if col == "scenario" else "right")
     for name in ("crowd", "groups"):
         st = [r["stats"] for (n, _), r in results.items() if n == name]
         use.add_row(name, *(str(sum(getattr(s, f) for s in st)) for f in (
             "steps", "frames_used", "train_frames", "score_maps", "splits", "splits_by_appearance", "overrides",
-            "checks", "exchanges", "reid_claims", "reids")))
+            "checks", "exchanges", "withheld", "reid_claims", "reids")))
     console.print(use)
 
     targets = Table(title="B19 targets (all scenarios and seeds)", header_style="bold")

@@ -23,7 +23,9 @@ from fusiontrack.sim.scenario import load_scenario
 from fusiontrack.types import CameraInfo, Event, GroundTruth, LaserScan, TrackState
 from fusiontrack.vision.people import camera_from_recording
 from fusiontrack.viz.fused_overlay import (
+    VEHICLE_MOVING_MPS,
     VEHICLE_SIZE_M,
+    _vehicle_headings,
     bias_at,
     laser_points_world,
     person_boxes,
@@ -151,52 +153,72 @@ def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def test_a_vehicle_track_is_drawn_as_its_cuboid_and_covers_the_true_box(simulated):
     """Against the simulator's true image boxes of the cars and bicycles of a road (fully visible, inside the
-    image): the cuboid of the class's size along the velocity covers them; a person's cylinder would not."""
+    image): the cuboid of the true size and heading covers them; so does the one the overlay draws for a track (its
+    class's size, along its velocity, or its last heading while it is stopped in the jam); a person's cylinder
+    would not."""
     path = simulated("road", seconds=16.0, seed=0)  # the traffic pipeline tests' recording
     with Recording(path) as rec:
         gt = {g.t_ns: g for g in rec.messages(["/ground_truth"]) if isinstance(g, GroundTruth)}
         frames = [f for f in rec.messages(["/ground_truth/camera_0"]) if isinstance(f, GroundTruth)]
         cam = camera_from_recording(rec, "camera_0", "camera_0")
     gt_t = np.array(sorted(gt))
-    iou: dict[str, list[float]] = {"class size": [], "true size": [], "person": []}
-    for f in frames[::2]:
+    iou: dict[str, list[float]] = {"truth": [], "track": [], "slow": [], "person": []}
+    memory: dict[int, float] = {}
+    for f in frames:
         g = gt[gt_t[np.argmin(np.abs(gt_t - int(f.attributes["t_true_ns"][0])))]] if len(f) else None
         box = np.asarray(f.attributes["box_px"], float).reshape(-1, 4)
         vis = np.asarray(f.attributes["visibility"], float)
         for k, agent in enumerate(f.ids):
             j = np.flatnonzero(g.ids == agent) if g is not None else []
+            if len(j) != 1 or g.classes[j[0]] == "person":
+                continue
+            j = j[0]
+            state = TrackState(f.t_ns, "laser", int(agent), g.positions_m[j], g.velocities_mps[j], cls=g.classes[j])
+            heading = _vehicle_headings([state], memory)  # the track's heading, as the video draws it
             inside = np.isfinite(box[k]).all() and box[k, 0] >= 0 and box[k, 1] >= 0 and box[k, 2] <= cam.width \
                 and box[k, 3] <= cam.height
-            if len(j) != 1 or g.classes[j[0]] == "person" or vis[k] < 0.95 or not inside:
+            if vis[k] < 0.95 or not inside:
                 continue
-            pos, vel, cls = g.positions_m[j[0]], g.velocities_mps[j[0]], g.classes[j[0]]
-            size = np.asarray(g.attributes["size_m"])[j[0]]
-            iou["class size"].append(_iou(vehicle_boxes(cam, pos, vel, VEHICLE_SIZE_M[cls]), box[k:k + 1])[0])
-            iou["true size"].append(_iou(vehicle_boxes(cam, pos, vel, size), box[k:k + 1])[0])
-            iou["person"].append(_iou(person_boxes(cam, pos[None]), box[k:k + 1])[0])
-    assert len(iou["class size"]) > 100
-    assert np.median(iou["true size"]) > 0.95
-    assert np.min(iou["true size"]) > 0.8
-    assert np.median(iou["class size"]) > 0.85
-    assert np.min(iou["class size"]) > 0.7
+            true = vehicle_boxes(cam, g.positions_m[j], [g.attributes["heading_rad"][j]], g.attributes["size_m"][j])
+            drawn = vehicle_boxes(cam, g.positions_m[j], heading, VEHICLE_SIZE_M[state.cls])
+            iou["truth"].append(_iou(true, box[k:k + 1])[0])
+            iou["track"].append(_iou(drawn, box[k:k + 1])[0])
+            if np.hypot(*g.velocities_mps[j]) < VEHICLE_MOVING_MPS:
+                iou["slow"].append(iou["track"][-1])
+            iou["person"].append(_iou(person_boxes(cam, g.positions_m[j][None]), box[k:k + 1])[0])
+    assert len(iou["track"]) > 200
+    # the jam: vehicles at a standstill, drawn along their last heading (this road runs along x, as a track that
+    # never moved would be drawn: the memory itself is tested in test_vehicle_boxes_headings_and_bad_input)
+    assert len(iou["slow"]) > 20
+    assert np.median(iou["truth"]) > 0.95
+    assert np.min(iou["truth"]) > 0.8
+    assert np.median(iou["track"]) > 0.85
+    assert np.min(iou["track"]) > 0.7
+    assert np.median(iou["slow"]) > 0.85
     assert np.median(iou["person"]) < 0.3
 
 
-def test_vehicle_boxes_heading_standstill_and_bad_input(crowd):
+def test_vehicle_boxes_headings_and_bad_input(crowd):
     cam = crowd["camera"]
-    ahead = cam.cam2world[:2, 3] + 12.0 * cam.cam2world[:2, 2] / np.linalg.norm(cam.cam2world[:2, 2])
+    axis = cam.cam2world[:2, 2] / np.linalg.norm(cam.cam2world[:2, 2])  # the optical axis on the floor
+    ahead = cam.cam2world[:2, 3] + 12.0 * axis
     size = (4.5, 1.8, 1.5)
-    across = cam.cam2world[:2, 0]  # the image's u axis on the floor: a car driving across the view is wide
-    wide = vehicle_boxes(cam, ahead, 10.0 * across, size)[0]
-    deep = vehicle_boxes(cam, ahead, 10.0 * cam.cam2world[:2, 2], size)[0]
-    assert wide[2] - wide[0] > 1.5 * (deep[2] - deep[0])
-    # standing still (heading unknown): along the world's x axis, as any velocity along x
-    assert np.allclose(vehicle_boxes(cam, ahead, (0.1, 0.0), size), vehicle_boxes(cam, ahead, (5.0, 0.0), size))
-    behind = cam.cam2world[:2, 3] - 12.0 * cam.cam2world[:2, 2] / np.linalg.norm(cam.cam2world[:2, 2])
-    assert np.isnan(vehicle_boxes(cam, [behind, [np.nan, 0.0]], np.zeros((2, 2)), [size, size])).all()
-    assert vehicle_boxes(cam, np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 3))).shape == (0, 4)
+    across = vehicle_boxes(cam, ahead, [math.atan2(axis[0], -axis[1])], size)[0]  # driving across the view
+    along = vehicle_boxes(cam, ahead, [math.atan2(axis[1], axis[0])], size)[0]  # driving away
+    assert across[2] - across[0] > 1.5 * (along[2] - along[0])
+    behind = cam.cam2world[:2, 3] - 12.0 * axis
+    assert np.isnan(vehicle_boxes(cam, [behind, [np.nan, 0.0]], [0.0, 0.0], [size, size])).all()
+    assert vehicle_boxes(cam, np.zeros((0, 2)), [], np.zeros((0, 3))).shape == (0, 4)
     with pytest.raises(ValueError, match="sizes_m"):
-        vehicle_boxes(cam, [ahead, ahead], np.zeros((2, 2)), [size])
+        vehicle_boxes(cam, [ahead, ahead], [0.0, 0.0], [size])
+    # headings: the velocity's while moving, the last moving one when stopped, the x axis before it ever moved
+    memory: dict[int, float] = {}
+
+    def car(tid: int, v: tuple[float, float]) -> TrackState:
+        return TrackState(0, "laser", tid, np.zeros(2), np.array(v), cls="car")
+
+    assert _vehicle_headings([car(1, (0.0, 3.0)), car(2, (0.1, 0.1))], memory) == pytest.approx([math.pi / 2, 0.0])
+    assert _vehicle_headings([car(1, (0.0, 0.0)), car(2, (-2.0, 0.0))], memory) == pytest.approx([math.pi / 2, math.pi])
 
 
 def test_bias_at_is_the_value_at_or_before_and_zero_before_the_first_update():

@@ -2,8 +2,10 @@
 
 Seed 001's fused system is fast because "only a limited number of targets required visual processing": the
 camera is read for the targets that need it (training, score maps, splits). :class:`LazyFrames` follows the
-laser clock through the image topic, keeping the raw bytes of the latest image only, and converts (deserialises
-to a :class:`~fusiontrack.types.Image`) the image nearest to a time on request, once.
+laser clock through the image topic, keeping the raw bytes of the latest image only, and converts (to a
+:class:`~fusiontrack.types.Image`: a ROS 2 raw image as a view of its bytes, as
+:meth:`~fusiontrack.io.Recording.messages` reads it, other images deserialised) the image nearest to a time on
+request, once.
 """
 
 from __future__ import annotations
@@ -105,11 +107,12 @@ class LazyFrames:
         img: Image | None = None
         try:
             # a ROS 2 raw image: its pixels a view of the bytes (as Recording.messages reads it), else deserialised
-            out = image_from_cdr_bytes(data, self.sensor) if conn.msgtype == IMAGE and not _is_ros1(conn) else None
+            reader = self._deser[id(conn)]
+            out = image_from_cdr_bytes(data, self.sensor) if conn.msgtype == IMAGE and reader.is2 else None
             if out is not None:
                 out = with_time(out, t_log)
             else:
-                msg = self._deser[id(conn)].deserialize(data, conn.msgtype)
+                msg = reader.deserialize(data, conn.msgtype)
                 out = FROM_ROS[conn.msgtype](msg, t_log, self.sensor, conn.topic)
             img = out if isinstance(out, Image) and out.encoding in ("bgr8", "rgb8") else None
             if img is not None and img.encoding == "rgb8":

@@ -436,6 +436,7 @@ class FusionStats:
     overrides: int = 0  # splits where appearance gave another assignment than motion
     checks: int = 0  # identity checks decided
     exchanges: int = 0  # ... that exchanged the identities of a pair
+    withheld: int = 0  # ... that found them exchanged but kept them: a voter's classifier too new (check_min_updates)
     reid_claims: int = 0  # new tracks born near a recently lost one (re-identification candidates)
     reids: int = 0  # ... given the lost identity
     camera_s: float = 0.0  # time spent on the camera side (reading, learning, scoring)
@@ -1084,7 +1085,9 @@ class FusionTracker:
         image (``check_visible``), each of the two classifiers that was trained when the check opened (its
         voters; a check without any is reopened at the next contact) gives its evidence, its confidence on its
         own track's box minus that on the other box. After ``check_frames`` images, a mean evidence beyond
-        ``± check_margin`` keeps the identities or exchanges them (:meth:`_exchange`); the decided check waits for
+        ``± check_margin`` keeps the identities or exchanges them (:meth:`_exchange`; only if every voter's
+        classifier has been updated ``check_min_updates`` times, else it keeps them: ``stats.withheld``); the
+        decided check waits for
         the pair's next contact (the next step, while they stay close) and is then run again by the same voters
         (a classifier first trained during the contact may have learnt the other person), until the pair has been
         apart for ``check_s``. A track is exchanged at most once per step
@@ -1178,8 +1181,9 @@ class FusionTracker:
                 if c.n >= p.check_frames and abs(mean) >= p.check_margin:
                     c.decided = True
                     self.stats.checks += 1
-                    if mean < 0 and self._reliable(voters) and self._exchange(pair[0], pair[1], c.swap_from_ns,
-                                                                               t_ns, mean):
+                    reliable = mean >= 0 or self._reliable(voters)
+                    self.stats.withheld += not reliable
+                    if mean < 0 and reliable and self._exchange(pair[0], pair[1], c.swap_from_ns, t_ns, mean):
                         c.exchanged = True
                         exchanged.append(pair)
                         busy.update(pair)

@@ -12,7 +12,8 @@ One output frame per image of the camera, the image itself underneath:
 * **tracks** — the states nearest in time (within half a scan period), each as its box (its ``box_px`` when
   the state has one in this camera, else the image box of a person cylinder standing at ``position_m``,
   :func:`person_boxes`, or for a track classed ``car`` or ``bicycle`` that of a car- or bicycle-sized cuboid
-  along its velocity, :func:`vehicle_boxes`), its id in :func:`~fusiontrack.vision.overlay.id_colour` (drawn by
+  along its velocity or, stopped, along its last heading, :func:`vehicle_boxes`; a vehicle track not classed
+  yet, ``unknown``, is drawn as a person), its id in :func:`~fusiontrack.vision.overlay.id_colour` (drawn by
   :func:`~fusiontrack.vision.overlay.draw_overlay`: thick while a sensor confirms it, thin and starred while it
   coasts or is merged), and its situation and confirming sensors under the box (``L`` laser, ``C`` camera).
 * **text** — top right: the bias (``bias 2.93 deg (settled)``; ``learning`` while it is being learnt, ``live`` for
@@ -27,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 from collections import deque
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -41,12 +43,14 @@ from ..errors import ConfigError, RecordingError
 from ..geometry import PinholeCamera, scan_to_points, transform_points
 from ..io.recording import LASERSCAN, Recording
 from ..io.video import write_video
+from ..sim.model import rect_corners
 from ..types import Event, Image, LaserScan, ObjectClass, Situation, TrackState
 from ..vision.overlay import draw_overlay, id_colour
 from ..vision.vehicles import VehicleDetectorParams
 from .preview import LASER_COLOURS, _transform_tree
 
 __all__ = [
+    "VEHICLE_MOVING_MPS",
     "VEHICLE_SIZE_M",
     "FusedOverlayResult",
     "ProjectedPoints",
@@ -69,6 +73,8 @@ VEHICLE_SIZE_M = {str(ObjectClass.CAR): VehicleDetectorParams().car_size_m,
                   str(ObjectClass.BICYCLE): VehicleDetectorParams().bicycle_size_m}
 """Length, width and height of the cuboid drawn for a track of each vehicle class (the camera vehicle pipeline's
 size priors, :class:`~fusiontrack.vision.vehicles.VehicleDetectorParams`)."""
+VEHICLE_MOVING_MPS = 0.5
+"""A vehicle track faster than this is drawn along its velocity; a slower one along its last such heading."""
 SITUATION_TEXT = {str(Situation.NONCORRELATED): "free", str(Situation.CORRELATED): "close",
                   str(Situation.MERGED): "merged", str(Situation.APPEARING): "new",
                   str(Situation.DISAPPEARING): "leaving"}
@@ -208,49 +214,56 @@ def person_boxes(camera: PinholeCamera, positions_m: Any, *, radius_m: float = P
     return out
 
 
-def vehicle_boxes(camera: PinholeCamera, positions_m: Any, velocities_mps: Any, sizes_m: Any,
-                  min_speed_mps: float = 0.5) -> np.ndarray:
-    """Image boxes of vehicle-sized cuboids standing at floor positions, each along its velocity.
+def vehicle_boxes(camera: PinholeCamera, positions_m: Any, headings_rad: Any, sizes_m: Any) -> np.ndarray:
+    """Image boxes of vehicle-sized cuboids standing on the floor.
 
-    The box is the bounding box of the cuboid's 8 projected corners. A vehicle slower than ``min_speed_mps``
-    (its heading unknown) is drawn along the world's x axis.
+    The box is the bounding box of the cuboid's 8 projected corners (its footprint,
+    :func:`~fusiontrack.sim.model.rect_corners`, at the floor and at its height).
 
     Parameters
     ----------
     camera : PinholeCamera
         The camera to draw in (already corrected by its bias).
-    positions_m, velocities_mps : (n, 2) float
-        Floor positions (the cuboid's centre) and velocities in the world.
+    positions_m : (n, 2) float
+        Footprint centres in the world.
+    headings_rad : (n,) float
+        Direction of each vehicle's length (world yaw).
     sizes_m : (n, 3) float
-        Length (along the velocity), width and height.
-    min_speed_mps : float
+        Length, width and height.
 
     Returns
     -------
     (n, 4) float64
-        ``(u_min, v_min, u_max, v_max)``; NaN rows for a position that is NaN or partly behind the camera.
+        ``(u_min, v_min, u_max, v_max)``; NaN rows for a vehicle with a NaN value or a corner behind the camera
+        (a car passing right by the camera is not drawn).
     """
     pos = np.asarray(positions_m, dtype=np.float64).reshape(-1, 2)
-    vel = np.asarray(velocities_mps, dtype=np.float64).reshape(-1, 2)
+    yaw = np.asarray(headings_rad, dtype=np.float64).reshape(-1)
     size = np.asarray(sizes_m, dtype=np.float64).reshape(-1, 3)
     n = len(pos)
-    if not (len(vel) == n and len(size) == n):
-        raise ValueError(f"velocities_mps, sizes_m: expected {n} rows each, got {len(vel)} and {len(size)}")
+    if not (len(yaw) == n and len(size) == n):
+        raise ValueError(f"headings_rad, sizes_m: expected {n} rows each, got {len(yaw)} and {len(size)}")
     if n == 0:
         return np.zeros((0, 4))
-    speed = np.hypot(vel[:, 0], vel[:, 1])
-    moving = speed >= min_speed_mps
-    u = np.where(moving[:, None], vel / np.where(moving, speed, 1.0)[:, None], [1.0, 0.0])  # along
-    v = np.column_stack([-u[:, 1], u[:, 0]])  # across
-    sl, sw = np.array([-0.5, 0.5, 0.5, -0.5]), np.array([-0.5, -0.5, 0.5, 0.5])
-    foot = (pos[:, None, :] + (sl[None, :, None] * size[:, 0, None, None]) * u[:, None, :]
-            + (sw[None, :, None] * size[:, 1, None, None]) * v[:, None, :])  # (n, 4, 2)
+    foot = rect_corners(pos, size[:, 0], size[:, 1], yaw)  # (n, 4, 2)
     xy = np.concatenate([foot, foot], axis=1)  # (n, 8, 2): bottom then top
     z = np.concatenate([np.zeros((n, 4)), np.repeat(size[:, 2:3], 4, axis=1)], axis=1)
     uv = camera.project(np.concatenate([xy, z[..., None]], axis=2).reshape(-1, 3)).reshape(n, 8, 2)
     ok = np.all(np.isfinite(uv), axis=(1, 2))
     out = np.full((n, 4), np.nan)
     out[ok] = np.concatenate([uv[ok].min(axis=1), uv[ok].max(axis=1)], axis=1)
+    return out
+
+
+def _vehicle_headings(states: Sequence[TrackState], memory: dict[int, float]) -> np.ndarray:
+    """Heading of each vehicle state: its velocity's while it moves (``VEHICLE_MOVING_MPS``), else the last one
+    its track had while moving (``memory``: track id -> yaw, updated here), else along the world's x axis."""
+    out = np.zeros(len(states))
+    for k, s in enumerate(states):
+        vx, vy = s.velocity_mps
+        if math.hypot(vx, vy) >= VEHICLE_MOVING_MPS:
+            memory[s.track_id] = math.atan2(vy, vx)
+        out[k] = memory.get(s.track_id, 0.0)
     return out
 
 
@@ -482,7 +495,8 @@ def _text(img: np.ndarray, text: str, org: tuple[int, int], scale: float,
 
 def _compose(image: Image, index: int, t0_ns: int, camera: PinholeCamera, bias: _Bias, points: np.ndarray,
              laser_index: np.ndarray, states: list[TrackState], events: list[str], camera_name: str,
-             colour_by: str, range_span_m: tuple[float, float]) -> tuple[np.ndarray, bool, bool]:
+             colour_by: str, range_span_m: tuple[float, float],
+             headings: dict[int, float]) -> tuple[np.ndarray, bool, bool]:
     bias_rad, bias_text = bias.at(image.t_ns)
     cam = camera.with_yaw_offset(bias_rad) if bias_rad else camera
     frame = np.ascontiguousarray(image.bgr()).copy()
@@ -515,7 +529,7 @@ def _compose(image: Image, index: int, t0_ns: int, camera: PinholeCamera, bias: 
         boxes[people] = person_boxes(cam, np.array([states[k].position_m for k in people]))
     if vehicles:
         boxes[vehicles] = vehicle_boxes(cam, np.array([states[k].position_m for k in vehicles]),
-                                        np.array([states[k].velocity_mps for k in vehicles]),
+                                        _vehicle_headings([states[k] for k in vehicles], headings),
                                         np.array([VEHICLE_SIZE_M[states[k].cls] for k in vehicles]))
     hi_uv = np.array([cam.width - 1.0, cam.height - 1.0])
     with np.errstate(invalid="ignore"):
@@ -647,6 +661,7 @@ def render_fused_overlay(
 
         def frames() -> Iterator[np.ndarray]:
             t0: int | None = None
+            headings: dict[int, float] = {}  # vehicle track id -> its last heading while moving
             stream = _frames_with_scans(rec, image_topic, scan_topics, poses, time_source, corrections,
                                         round(max_scan_dt_s * 1e9))
             for index, (image, points, laser_index) in enumerate(stream):
@@ -655,7 +670,7 @@ def render_fused_overlay(
                 t0 = image.t_ns if t0 is None else t0
                 out, has_points, has_tracks = _compose(image, index, t0, cam, bias, points, laser_index,
                                                        cursor.at(image.t_ns), event_cursor.at(image.t_ns), camera,
-                                                       colour_by, (lo, hi))
+                                                       colour_by, (lo, hi), headings)
                 counts["points"] += has_points
                 counts["tracks"] += has_tracks
                 yield out
