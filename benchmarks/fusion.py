@@ -42,7 +42,7 @@ Identity figures swing from run to run: on the same 30 s scenes one change to th
 ID switches up in one run and down in another, and 24 paired runs have pointed the wrong way (score maps: 54 ID
 switches against 50 without over crowd + groups seeds 0-11; 253 against 270 over seeds 0-35). Judge a change to
 the identities on many seeds; ``--skip-camera`` leaves camera-only out (its columns and its target then say so),
-which halves the time of such a run, e.g. ``--seeds $(seq 0 35) --skip-camera`` (about 15 minutes).
+which halves the time of such a run, e.g. ``--seeds $(seq 0 35) --skip-camera`` (about 20 minutes).
 
     .venv/bin/python benchmarks/fusion.py [--seeds 0 1 2] [--crowd-seconds 30] [--groups-seconds 30] [--no-bias]
         [--repeat 1] [--skip-camera]
