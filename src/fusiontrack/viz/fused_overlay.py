@@ -205,9 +205,16 @@ def person_boxes(camera: PinholeCamera, positions_m: Any, *, radius_m: float = P
         return np.zeros((0, 4))
     a = np.linspace(0.0, 2 * np.pi, n_sides, endpoint=False)
     ring = radius_m * np.column_stack([np.cos(a), np.sin(a)])  # (k, 2)
-    xy = np.repeat(pos[:, None, :] + ring[None], 2, axis=1)  # (n, 2k, 2): bottom rim then top rim
-    z = np.repeat(np.array([0.0, height_m]), n_sides)[None, :].repeat(n, axis=0)  # (n, 2k)
-    uv = camera.project(np.concatenate([xy, z[..., None]], axis=2).reshape(-1, 3)).reshape(n, 2 * n_sides, 2)
+    return _prism_boxes(camera, pos[:, None, :] + ring[None], np.full(n, float(height_m)))
+
+
+def _prism_boxes(camera: PinholeCamera, outline_m: np.ndarray, height_m: np.ndarray) -> np.ndarray:
+    """Image bounding boxes ``(n, 4)`` of upright prisms: floor outlines ``(n, k, 2)`` raised to ``height_m (n,)``;
+    NaN rows where a corner is NaN or behind the camera."""
+    n, k = outline_m.shape[:2]
+    xy = np.concatenate([outline_m, outline_m], axis=1)  # (n, 2k, 2): bottom then top
+    z = np.concatenate([np.zeros((n, k)), np.repeat(height_m[:, None], k, axis=1)], axis=1)
+    uv = camera.project(np.concatenate([xy, z[..., None]], axis=2).reshape(-1, 3)).reshape(n, 2 * k, 2)
     ok = np.all(np.isfinite(uv), axis=(1, 2))
     out = np.full((n, 4), np.nan)
     out[ok] = np.concatenate([uv[ok].min(axis=1), uv[ok].max(axis=1)], axis=1)
@@ -245,14 +252,7 @@ def vehicle_boxes(camera: PinholeCamera, positions_m: Any, headings_rad: Any, si
         raise ValueError(f"headings_rad, sizes_m: expected {n} rows each, got {len(yaw)} and {len(size)}")
     if n == 0:
         return np.zeros((0, 4))
-    foot = rect_corners(pos, size[:, 0], size[:, 1], yaw)  # (n, 4, 2)
-    xy = np.concatenate([foot, foot], axis=1)  # (n, 8, 2): bottom then top
-    z = np.concatenate([np.zeros((n, 4)), np.repeat(size[:, 2:3], 4, axis=1)], axis=1)
-    uv = camera.project(np.concatenate([xy, z[..., None]], axis=2).reshape(-1, 3)).reshape(n, 8, 2)
-    ok = np.all(np.isfinite(uv), axis=(1, 2))
-    out = np.full((n, 4), np.nan)
-    out[ok] = np.concatenate([uv[ok].min(axis=1), uv[ok].max(axis=1)], axis=1)
-    return out
+    return _prism_boxes(camera, rect_corners(pos, size[:, 0], size[:, 1], yaw), size[:, 2])
 
 
 def _vehicle_headings(states: Sequence[TrackState], memory: dict[int, float]) -> np.ndarray:
