@@ -1087,8 +1087,8 @@ class FusionTracker:
         own track's box minus that on the other box. After ``check_frames`` images, a mean evidence beyond
         ``± check_margin`` keeps the identities or exchanges them (:meth:`_exchange`; only if every voter's
         classifier has been updated ``check_min_updates`` times, else it keeps them: ``stats.withheld``); the
-        decided check waits for
-        the pair's next contact (the next step, while they stay close) and is then run again by the same voters
+        decided check waits for the pair's next contact (the next step, while they stay close) and is then run
+        again by the same voters
         (a classifier first trained during the contact may have learnt the other person), until the pair has been
         apart for ``check_s``. A track is exchanged at most once per step
         (a later check of it waits for the next image: its evidence was reset and this step's boxes carry the old
