@@ -27,6 +27,8 @@ from fusiontrack.sim.situations import (
     segment_situation_events,
     segment_situations,
 )
+from fusiontrack.tracking.association import association_states, gate_distances
+from fusiontrack.tracking.situations import classify_situations
 from fusiontrack.types import Situation
 
 BOUNDS = (-10.0, -10.0, 10.0, 10.0)
@@ -77,6 +79,22 @@ def test_a_shared_segment_merges_only_when_every_gate_holding_it_holds_nothing_e
 def test_gate_of_radius_2h_about_the_true_centre(gap_m: float, expected: Situation) -> None:
     f = _frame(0, [1, 2], [[0, 0], [gap_m, 0]], [[0, 0], [gap_m, 0]], [[8, 0], [0, 8]])
     assert _labels(f) == [expected, expected]
+
+
+@pytest.mark.parametrize(("x2_m", "expected"), [(0.85, [C, C]), (1.0, [N, N])])
+def test_a_segment_found_by_a_neighbour_with_two_detections_is_correlated(x2_m: float, expected) -> None:
+    # 1 at 0 with its segment at 0.1; 2 at x2 with its segment 0.05 m further out. At 0.85 m: 1's segment is
+    # 0.75 m from 2 (inside 2's gate: c_2 = 2, correlated) while 2's segment is 0.9 m from 1 (outside: c_1 = 1).
+    # 1's one detection is found by 2 as well (r = 2): B7 rule 4 needs r = 1, rule 1 needs every finder to have
+    # c = 1, so 1 interacts too (rule 3's completion). At 1.0 m nobody's gate holds the other's segment.
+    centres = [[0.1, 0.0], [x2_m + 0.05, 0.0]]
+    f = _frame(0, [1, 2], [[0.0, 0.0], [x2_m, 0.0]], centres, [[8, 0], [0, 8]])
+    assert _labels(f) == expected
+    # the tracker's own B6 gate and B7 rules on the same geometry (predicted centres = the true ones) agree
+    D = gate_distances(np.array([[0.0, 0.0], [x2_m, 0.0]]), np.array(centres), 0.4)
+    c, r, found = association_states(D, 4.0)
+    frame = classify_situations(c, r, found, np.zeros(2, bool), np.zeros(2, bool), np.zeros(2, bool), D)
+    assert frame.situations() == expected
 
 
 def test_own_legs_in_two_segments_or_clutter_in_the_gate_are_not_correlated() -> None:
@@ -211,12 +229,14 @@ def test_hidden_between_two_people_is_no_merge() -> None:
     # 3 stands at (0, 1): while 2 is hidden behind 1 (at most 0.66 m from 3) its gate holds 1's and 3's segments
     # (c = 2: B7 rule 3, not rule 1), so no merge, although 1's and 3's gates hold their own segments alone (without
     # 3 the same walk is a merge: test above). The hidden person's target would be correlated in a B7 tracker; the
-    # truth leaves it hidden (it has no returns of its own to label), and 1 and 3 keep what their own gates hold.
+    # truth leaves it hidden (it has no returns of its own to label). 1's and 3's segments are each found by that
+    # target too (r = 2), which found two (c = 2): neither rule 1 nor rule 4 holds, so they interact (rule 3's
+    # completion), as a B7 tracker labels them.
     frames = _walk_behind(0.4, third=True)
     hidden = _hidden_frames(frames)
     assert not [e for e in segment_situation_events(frames, BOUNDS) if e.kind in ("merge", "split")]
     labels = segment_situations(frames, BOUNDS).labels
-    assert all(list(labels[k]) == [N, HIDDEN, N] for k in hidden)
+    assert all(list(labels[k]) == [C, HIDDEN, C] for k in hidden)
 
 
 @pytest.mark.parametrize(("away_frames", "split"), [(75, False), (25, True)])

@@ -93,7 +93,11 @@ that hit that agent (noise-free cast of the simulator: exact attribution, no dis
   :mod:`fusiontrack.tracking.situations`), or (b) B6's gate about its true centre (circle of radius
   ``gate_m = 2h = 0.8 m``) holds the centres of at least two segments that have members, at least one of
   which holds another agent (``c_k = 2`` because of another person, not because its own two legs fell into
-  two segments). Segments of no agent (clutter, background errors) are left out of the gate count;
+  two segments), or (c) a member of a segment that the gate of another target with ``c = 2`` holds: that
+  segment has ``r = 2``, so B7 rule 4 (``r_j = 1``) does not hold for the agent's target, nor rule 1 (every
+  target finding it has ``c = 1``): the same completion of rule 3 as the tracker's (before, (c) was missing, and
+  an agent whose neighbour's gate held its segment, but not the other way round, was noncorrelated while its
+  neighbour was correlated). Segments of no agent (clutter, background errors) are left out of the gate count;
 * ``appearing`` — within ``appear_window_s = 1 s`` after an *appear* event of the agent (below);
   ``disappearing`` — within ``appear_window_s`` before a *disappear* event; ``noncorrelated`` otherwise;
   precedence as in the centre-distance truth. Hidden agents get the empty label ``""`` (``merged`` when merged by
@@ -733,6 +737,7 @@ def _segment_analysis(frames: Sequence[SegmentFrame], bounds_m: Any, min_returns
             # partners: members of the segments in the gate and of the shared segments one is a member of
             touch = gated | (member.T & (n_mem >= 2)[None, :])
             near = (touch.astype(np.int64) @ member.astype(np.int64)) > 0  # (n, n)
+            near |= near.T  # both sides of an interaction: whose gate holds my segment is a partner too
             np.fill_diagonal(near, False)
             best = np.argmax(f.returns, axis=0)
             centre = np.where(seen[:, None], f.centres_m[best], np.nan)
@@ -742,7 +747,14 @@ def _segment_analysis(frames: Sequence[SegmentFrame], bounds_m: Any, min_returns
             centre = np.full((n, 2), np.nan)
         seen_all.append(seen)
         merged_all.append(set_index)
-        corr_all.append(seen & ~merged & (in_shared | by_gate))
+        if len(f.centres_m) and n:
+            # (c): a member of a segment that another target with c >= 2 finds (r = 2, rule 3's completion)
+            g2 = gated_t & (c >= 2)[:, None]  # (n, m)
+            others = g2.sum(axis=0)[None, :] - g2  # per agent and segment: the *other* such targets finding it
+            by_share = (member.T & (others >= 1)).any(axis=1)
+        else:
+            by_share = np.zeros(n, bool)
+        corr_all.append(seen & ~merged & (in_shared | by_gate | by_share))
         partners_all.append([f.ids[near[j]] for j in range(n)])
         centre_all.append(centre)
 
