@@ -97,6 +97,17 @@ def test_a_segment_found_by_a_neighbour_with_two_detections_is_correlated(x2_m: 
     assert frame.situations() == expected
 
 
+@pytest.mark.parametrize("occlusion_merges", [True, False])
+def test_an_agent_never_seen_has_no_target_and_makes_nobody_correlated(occlusion_merges: bool) -> None:
+    # 2 stands between 1 and 3 (0.5 m from each) but has never been seen: it has no target, so no gate finds 1's
+    # and 3's segments a second time (case (c) counts targets, seen or alive, whatever occlusion_merges)
+    f = _frame(0, [1, 2, 3], [[0, 0], [0, 0.5], [0, 1.0]], [[0, 0], [0, 1.0]], [[8, 0, 0], [0, 0, 8]])
+    labels = segment_situations([f], BOUNDS, occlusion_merges=occlusion_merges)
+    assert list(labels.labels[0]) == [N, HIDDEN, N]
+    assert labels.partners[0][0].tolist() == []  # 2 is nobody's partner
+    assert labels.partners[0][2].tolist() == []
+
+
 def test_own_legs_in_two_segments_or_clutter_in_the_gate_are_not_correlated() -> None:
     # 1's legs fell into two segments; a clutter segment (nobody's returns) lies in 2's gate
     f = _frame(0, [1, 2], [[0, 0], [5, 0]], [[-0.2, 0], [0.2, 0], [5, 0], [5.3, 0]],

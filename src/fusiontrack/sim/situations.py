@@ -97,7 +97,12 @@ that hit that agent (noise-free cast of the simulator: exact attribution, no dis
   segment has ``r = 2``, so B7 rule 4 (``r_j = 1``) does not hold for the agent's target, nor rule 1 (every
   target finding it has ``c = 1``): the same completion of rule 3 as the tracker's (before, (c) was missing, and
   an agent whose neighbour's gate held its segment, but not the other way round, was noncorrelated while its
-  neighbour was correlated). Segments of no agent (clutter, background errors) are left out of the gate count;
+  neighbour was correlated). Like the tracker's ``c``, the other target's count is of segments: a person hidden
+  behind an agent whose legs fell into two segments has ``c = 2`` and makes the agent correlated (with one leg
+  segment they merge). Targets are the seen or alive agents whatever ``occlusion_merges``. A known difference
+  remains: a hidden member of a merged pair is gated at its own true position, while the tracker gates its
+  merged target by its members' estimated positions and labels a member ``merged`` where the truth may say
+  correlated. Segments of no agent (clutter, background errors) are left out of the gate count;
 * ``appearing`` — within ``appear_window_s = 1 s`` after an *appear* event of the agent (below);
   ``disappearing`` — within ``appear_window_s`` before a *disappear* event; ``noncorrelated`` otherwise;
   precedence as in the centre-distance truth. Hidden agents get the empty label ``""`` (``merged`` when merged by
@@ -410,7 +415,8 @@ class SegmentAnalysis:
     merged_set : list of (n_k,) int64
         Merged-set index within the frame, ``-1`` = not merged (hidden agents merged by occlusion included).
     partners : list of list of (p,) int64
-        Per agent, the other agents it interacts with (sharing a segment, or members of a gated segment).
+        Per agent, the other agents it interacts with (sharing a segment, members of a gated segment, or targets
+        whose gate holds one of its segments).
     segment_centre : list of (n_k, 2) float64
         Centre of the segment holding most of the agent's returns (NaN when hidden).
     target_since : list of (n_k,) int64
@@ -705,7 +711,8 @@ def _segment_analysis(frames: Sequence[SegmentFrame], bounds_m: Any, min_returns
         for i in f.ids[seen & ~alive].tolist():  # a new target: first seen, or seen again after it was gone
             since[i] = f.t_ns
         # the targets: seen now, or alive (B7 N_miss); without occlusion merges every listed agent's gate counts
-        target = seen | alive if occlusion_merges else np.ones(n, bool)
+        live = seen | alive
+        target = live if occlusion_merges else np.ones(n, bool)
         gated_t = gated & target[:, None]
         c = gated_t.sum(axis=1)
         busy = (gated_t & (c >= 2)[:, None]).any(axis=0)  # segments some target with c >= 2 finds
@@ -737,7 +744,7 @@ def _segment_analysis(frames: Sequence[SegmentFrame], bounds_m: Any, min_returns
             # partners: members of the segments in the gate and of the shared segments one is a member of
             touch = gated | (member.T & (n_mem >= 2)[None, :])
             near = (touch.astype(np.int64) @ member.astype(np.int64)) > 0  # (n, n)
-            near |= near.T  # both sides of an interaction: whose gate holds my segment is a partner too
+            near |= (near & live[:, None]).T  # both sides: a target whose gate holds my segment is a partner
             np.fill_diagonal(near, False)
             best = np.argmax(f.returns, axis=0)
             centre = np.where(seen[:, None], f.centres_m[best], np.nan)
@@ -748,10 +755,12 @@ def _segment_analysis(frames: Sequence[SegmentFrame], bounds_m: Any, min_returns
         seen_all.append(seen)
         merged_all.append(set_index)
         if len(f.centres_m) and n:
-            # (c): a member of a segment that another target with c >= 2 finds (r = 2, rule 3's completion)
-            g2 = gated_t & (c >= 2)[:, None]  # (n, m)
+            # (c): a member of a segment its own gate and that of another target with c >= 2 hold (r = 2, rule 3's
+            # completion); targets = seen or alive (also with occlusion_merges=False: a never-seen agent has none)
+            g_live = gated & live[:, None]
+            g2 = g_live & (g_live.sum(axis=1) >= 2)[:, None]  # (n, m)
             others = g2.sum(axis=0)[None, :] - g2  # per agent and segment: the *other* such targets finding it
-            by_share = (member.T & (others >= 1)).any(axis=1)
+            by_share = (member.T & g_live & (others >= 1)).any(axis=1)
         else:
             by_share = np.zeros(n, bool)
         corr_all.append(seen & ~merged & (in_shared | by_gate | by_share))
