@@ -40,12 +40,15 @@ not change from one repeat to the next): a burst of load from another job then i
 
 Identity figures swing from run to run: on the same 30 s scenes one change to the fused tracker often turns a few
 ID switches up in one run and down in another, and 24 paired runs have pointed the wrong way (score maps: 54 ID
-switches against 50 without over crowd + groups seeds 0-11; 253 against 270 over seeds 0-35). Judge a change to
-the identities on many seeds; ``--skip-camera`` leaves camera-only out (its columns and its target then say so),
-which halves the time of such a run, e.g. ``--seeds $(seq 0 35) --skip-camera`` (about 20 minutes).
+switches against 50 without over crowd + groups seeds 0-11). The trackers' own random draws (``--rng``, the
+particle filters' seed; default 0) move even the 72-run totals (crowd + groups, seeds 0-35, 30 s): fusion 253 /
+244 / 260 ID switches with rng 0 / 1 / 2, laser-only 262 / 239 / 247, fusion without score maps 270 / 244 / 257.
+Judge a change to the identities on many seeds and more than one ``--rng``; ``--skip-camera`` leaves camera-only
+out (its columns and its target then say so), which halves the time of such a run, e.g. ``--seeds $(seq 0 35)
+--skip-camera`` (about 20 minutes).
 
     .venv/bin/python benchmarks/fusion.py [--seeds 0 1 2] [--crowd-seconds 30] [--groups-seconds 30] [--no-bias]
-        [--repeat 1] [--skip-camera]
+        [--repeat 1] [--skip-camera] [--rng 0]
 """
 
 from __future__ import annotations
@@ -135,7 +138,7 @@ def splits_resolved(gt: Sequence[GroundTruth], truth_events: Sequence[Event], st
 
 
 def run_sim(name: str, seconds: float, seed: int, tmp: Path, bias: bool = True, repeat: int = 1,
-            camera: bool = True) -> dict[str, Any]:
+            camera: bool = True, rng: int = 0) -> dict[str, Any]:
     scenario = load_scenario(name).with_overrides(seconds=seconds, seed=seed)
     path = tmp / f"{name}_{seed}_{int(seconds)}"
     sim = simulate(scenario, path)
@@ -161,11 +164,12 @@ def run_sim(name: str, seconds: float, seed: int, tmp: Path, bias: bool = True, 
     bias_cpu: list[float] = []
     for _ in range(repeat):
         t0 = time.process_time()
-        laser_states, _ = track_recording(path, params=SIM_PF, area_m=bounds, clock_corrections_ns=corrections)
+        laser_states, _ = track_recording(path, params=SIM_PF, area_m=bounds, clock_corrections_ns=corrections,
+                                          rng=rng)
         spent["laser"].append(time.process_time() - t0)
         t0 = time.process_time()
         fused, _, stats = track_fused(path, tracker_params=SIM_PF, area_m=bounds, clock_corrections_ns=corrections,
-                                      adaptive_bias=bias, frames_wrapper=_bias_clock(bias_cpu, t0))
+                                      adaptive_bias=bias, frames_wrapper=_bias_clock(bias_cpu, t0), rng=rng)
         spent["fusion"].append(time.process_time() - t0)
         if camera:
             # through the camera fusion used (corrected by the bias it learnt, if it settled): both get the same one
@@ -205,6 +209,8 @@ def main() -> None:
                         "of laser-only and fusion over many seeds)")
     parser.add_argument("--repeat", type=int, default=1, help="run each system this many times and take the least "
                         "CPU time (steadier ratios on a loaded machine)")
+    parser.add_argument("--rng", type=int, default=0, help="seed of the particle filters' random draws (laser-only "
+                        "and fusion draw the same stream)")
     args = parser.parse_args()
     if args.repeat < 1:
         parser.error(f"--repeat: expected at least 1, got {args.repeat}")
@@ -215,13 +221,14 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         results = {(name, seed): run_sim(name, secs, seed, tmp, bias=not args.no_bias, repeat=args.repeat,
-                                         camera=not args.skip_camera)
+                                         camera=not args.skip_camera, rng=args.rng)
                    for name, secs in (("crowd", args.crowd_seconds), ("groups", args.groups_seconds))
                    for seed in args.seeds}
     compared = " vs ".join(label for _, label in systems)
     table = Table(title=f"seed 001: {compared} (crowd {args.crowd_seconds:g} s, groups "
                         f"{args.groups_seconds:g} s; match 0.5 m; ms per 25 Hz frame; fusion "
-                        f"{'through the camera as calibrated' if args.no_bias else 'with the adaptive bias'})",
+                        f"{'through the camera as calibrated' if args.no_bias else 'with the adaptive bias'}"
+                        f"{f'; rng {args.rng}' if args.rng else ''})",
                   header_style="bold")
     for col in ("scenario", "seed", "people", "system", "MOTA", "IDF1", "IDF1 ceiling", "HOTA", "IDSW",
                 "splits resolved",
