@@ -124,7 +124,13 @@ class FusionParams:
         0.928 -> 0.887, groups seed 10 2 -> 8 switches). It was off while the classifiers learnt mean R, G, B
         (before B13's chromaticity colour, ``FeatureParams.colour``): the map then pulled particles towards the
         neighbour's look-alike patches and cost identities. Old detector: ``score_beta`` 1.0 instead of 0.5, the
-        same switches, MOTA 0.890; 150 ``map_patches`` instead of 300: 109 switches.
+        same switches, MOTA 0.890; 150 ``map_patches`` instead of 300: 109 switches. Over 72 runs (crowd and
+        groups, seeds 0-35) and three seeds of the particle filters' draws (rng 0, 1, 2): ID switches 253 / 244 /
+        260 with the maps, 270 / 244 / 257 without (within the draws' own spread), groups IDF1 0.914 / 0.915 /
+        0.910 with, 0.902 / 0.912 / 0.901 without (better with each rng), crowd IDF1 the same (0.933). The maps
+        move little per image: over crowd and groups seeds 0-2 the median spread of a target's particles is 1.6 px
+        in the image against the kernel's 12 px, and the map changes their log-weights by at most 0.07 (median;
+        0.19 at the 90th percentile), a nudge that adds up over frames.
     score_beta : float
         Exponent of the score-map likelihood (the last annealing level's weight would be 1; the laser
         likelihood is kept, so the camera term is tempered) [RECON].
