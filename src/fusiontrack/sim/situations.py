@@ -741,6 +741,12 @@ def _segment_analysis(frames: Sequence[SegmentFrame], bounds_m: Any, min_returns
         if len(f.centres_m) and n:
             holds_other = (n_mem[None, :] - member.T) >= 1  # (n, m)
             by_gate = (gated.sum(axis=1) >= 2) & (gated & holds_other).any(axis=1)
+            # (c): a member of a segment its own gate and that of another target with c >= 2 hold (r = 2, rule 3's
+            # completion); targets = seen or alive (also with occlusion_merges=False: a never-seen agent has none)
+            g_live = gated & live[:, None]
+            g2 = g_live & (g_live.sum(axis=1) >= 2)[:, None]  # (n, m)
+            others = g2.sum(axis=0)[None, :] - g2  # per agent and segment: the *other* such targets finding it
+            by_share = (member.T & g_live & (others >= 1)).any(axis=1)
             # partners: members of the segments in the gate and of the shared segments one is a member of
             touch = gated | (member.T & (n_mem >= 2)[None, :])
             near = (touch.astype(np.int64) @ member.astype(np.int64)) > 0  # (n, n)
@@ -749,20 +755,11 @@ def _segment_analysis(frames: Sequence[SegmentFrame], bounds_m: Any, min_returns
             best = np.argmax(f.returns, axis=0)
             centre = np.where(seen[:, None], f.centres_m[best], np.nan)
         else:
-            by_gate = np.zeros(n, bool)
+            by_gate = by_share = np.zeros(n, bool)
             near = np.zeros((n, n), bool)
             centre = np.full((n, 2), np.nan)
         seen_all.append(seen)
         merged_all.append(set_index)
-        if len(f.centres_m) and n:
-            # (c): a member of a segment its own gate and that of another target with c >= 2 hold (r = 2, rule 3's
-            # completion); targets = seen or alive (also with occlusion_merges=False: a never-seen agent has none)
-            g_live = gated & live[:, None]
-            g2 = g_live & (g_live.sum(axis=1) >= 2)[:, None]  # (n, m)
-            others = g2.sum(axis=0)[None, :] - g2  # per agent and segment: the *other* such targets finding it
-            by_share = (member.T & g_live & (others >= 1)).any(axis=1)
-        else:
-            by_share = np.zeros(n, bool)
         corr_all.append(seen & ~merged & (in_shared | by_gate | by_share))
         partners_all.append([f.ids[near[j]] for j in range(n)])
         centre_all.append(centre)
