@@ -32,7 +32,7 @@ Tables, all measured in this process, one run after another (no parallel load on
    within 0.5 m). The situation truth calls a pair merged below 0.6 m; where the simulated pairs walk
    (0.5-0.6 m) the segmentation is ambiguous, and so is the instant of a merge or split;
 5. scaling: time per scan for 5-80 people (``agents.mean_present``) in the ``crowd`` hall, and MOTA, also of the PF
-   with ``n_merge`` 3 (the setting for very dense crowds);
+   with ``cap_merges`` (the setting for very dense crowds: a merge takes no more people than its segment shows);
 6. the real outdoor bag of leg_tracker (one annotated person, 720 s, laser frame, 10 Hz): MOTA with the
    annotators' 0.75 m threshold, on the annotated scans (annotations after scan k belong to scan k);
    then the people pipeline on a simulated road (:func:`road`): the tracks each car and bicycle gets, their
@@ -89,7 +89,7 @@ ROOT = Path(__file__).resolve().parents[1]
 OUTDOOR_ZIP = ROOT.parent / "shared/data/laser/leg_tracker_outdoor/person_following_outdoor_1.bag.zip"
 WARMUP_S = 3.0
 SIM_PF = {"lateral_m": 0.2}  # the simulator's feet are 0.2 m apart side by side
-DENSE_PF = {"n_merge": 3}  # the scaling table's second PF: merges confirmed over 3 frames (TrackerParams.n_merge)
+DENSE_PF = {"cap_merges": True}  # the scaling table's second PF (TrackerParams.cap_merges)
 # The outdoor bag: a scanner on a robot following a person through clutter. Segments of fewer than 10 points
 # are far-away clutter (the followed person, 0.7-2.7 m away, gives 10-45 points). The scanner moves, so the
 # covered area cannot be read off its background: no edge (every birth and death is an interior one).
@@ -401,7 +401,7 @@ def main() -> None:
             scale = Table(title=f"scaling: crowd hall, {args.scaling_seconds:g} s, seed {args.seeds[0]}, 2 scanners",
                           header_style="bold")
             for col in ("people set", "mean present", "PF track ms med / p95", "PF ms per person",
-                        "PF detect+track ms med", "PF MOTA", "PF MOTA, n_merge 3", "Kalman track ms med",
+                        "PF detect+track ms med", "PF MOTA", "PF MOTA, cap_merges", "Kalman track ms med",
                         "Kalman MOTA"):
                 scale.add_column(col, justify="right")
             for n in args.scaling:
@@ -413,9 +413,10 @@ def main() -> None:
                               f"{pf['m'].mota:.3f}", f"{r['pf_variant'].mota:.3f}", f"{kf['track_ms'][0]:.2f}",
                               f"{kf['m'].mota:.3f}")
             console.print(scale)
-            console.print("  n_merge 3 (merges confirmed over 3 frames) is the PF's setting for very dense crowds "
-                          "(about 70 people): there most shared detections are a neighbour's occlusion "
-                          "(TrackerParams.n_merge); at 72 people the CV Kalman still scores higher")
+            console.print("  cap_merges (a merge takes at most as many people as its segment shows leg pairs) is the "
+                          "PF's setting for very dense crowds (about 70 people): there most shared detections are a "
+                          "neighbour's occlusion (TrackerParams.cap_merges); at 72 people the CV Kalman still "
+                          "scores higher")
 
         outdoor_result = None
         if not args.skip_outdoor:

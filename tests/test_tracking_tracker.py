@@ -206,7 +206,8 @@ def test_parameters_are_validated_by_name() -> None:
     with pytest.raises(ConfigError, match="area"):
         LaserPeopleTracker(area_m=[1, 2, 0, 0])
     assert LaserPeopleTracker({"n_particles": 50}).params.n_particles == 50
-    for key, value in (("vehicles", "yes"), ("vehicle_q", 0.0), ("vehicle_gate_m", np.inf), ("vehicle_n_confirm", 0)):
+    for key, value in (("vehicles", "yes"), ("cap_merges", 1), ("vehicle_q", 0.0), ("vehicle_gate_m", np.inf),
+                       ("vehicle_n_confirm", 0)):
         with pytest.raises(ConfigError, match=key):
             TrackerParams(**{key: value})
 
@@ -658,3 +659,43 @@ def test_the_walking_model_cannot_follow_a_car() -> None:
     out, car, _, _ = _car_and_walker(vehicles=False)
     on_car = [s for k, states in enumerate(out) for s in states if np.hypot(*(s.position_m - car[k])) < 1.0]
     assert len({s.track_id for s in on_car}) >= 3 or len(on_car) < len(out) / 2
+
+
+def _leg_points(feet: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Scan points on legs: 6 points within 4 cm of each foot of ``feet (k, 2)``."""
+    return np.concatenate([f + rng.uniform(-0.04, 0.04, (6, 2)) for f in feet])
+
+
+@pytest.mark.parametrize(("cap", "legs_of", "merged"), [(False, (1,), 3), (True, (1,), 2), (True, (0, 1, 2), 3)])
+def test_cap_merges_takes_no_more_people_than_the_segment_shows(cap: bool, legs_of: tuple[int, ...],
+                                                                merged: int) -> None:
+    """Three walkers abreast (0.55 and 0.7 m from the middle one) are seen for 0.6 s as one segment at the middle
+    one, holding the legs of ``legs_of``: every target finds only that segment (B7 rule 1: one merge of three).
+    With ``cap_merges`` a merge takes at most ⌈leg blobs / 2⌉ people (at least 2), nearest first: the legs of one
+    person merge the middle walker and the nearer neighbour, and the farther one stays correlated; the legs of
+    three merge all three."""
+    rng = np.random.default_rng(11)
+    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0, cap_merges=cap)
+    n = 3 * 25
+    ys = (4.45, 5.0, 5.7)
+    walks = [_walk(n, np.array([2.0, y]), np.zeros(n), 1.2, 1.4, phase0=1.1 * w) for w, y in enumerate(ys)]
+    merges, far_situations = [], set()
+    for k in range(n):
+        t_ns = k * FRAME_NS
+        if 40 <= k < 55:
+            feet = np.concatenate([walks[w][1][k] for w in legs_of])
+            pts = _leg_points(feet, rng)
+            centre = walks[1][0][k]
+            dets = [Detection(t_ns, "laser", position_m=centre, features={
+                "feet_m": walks[1][1][k], "inter_feet_m": np.asarray(0.2), "one_foot": np.asarray(False),
+                "points_m": pts})]
+        else:
+            dets = [_detection(t_ns, walks[w][1][k], rng) for w in range(3)]
+        states = trk.step(t_ns, dets)
+        merges += [e for e in trk.events if e.kind == "merge"]
+        if 41 <= k < 55:
+            far_situations |= {s.situation for s in states if s.track_id == 3}
+    assert [len(e.track_ids) for e in merges[:1]] == [merged]
+    if merged == 2:
+        assert set(merges[0].track_ids) == {1, 2}  # the middle walker and its nearer neighbour
+        assert far_situations == {Situation.CORRELATED}

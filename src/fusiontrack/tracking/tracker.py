@@ -221,12 +221,25 @@ class TrackerParams:
         IDSW over tracker seeds 0-2: crowd 0.886/0.874/43 -> 0.877/0.873/50, groups 0.927/0.903/4.7 ->
         0.942/0.938/3.3; but the fusion tests built on the laser tracker's splits of one side-by-side pair
         (appearance-decided splits, the identity check) lose the splits they need, so it is off until they are
-        looked at. **Very dense crowds (about 70 people in view): use 3.** In ``benchmarks/laser_people.py``'s
-        scaling hall (crowd, 20 s, seed 0), MOTA with 35 / 72 people present is 0.867 / 0.456 with 1 and
-        0.825 / 0.566 with 3 (our CV Kalman: 0.866 / 0.659). At 72 most shared detections are a neighbour occluding
-        a person, and merged targets place their members badly [RECON]. (These figures are with the detector's
-        ``min_cluster_points`` 1; with 2, which lost far legs, 3 helped from 35 people on: 0.735 -> 0.749.)
-        The other figures above were measured with ``min_cluster_points`` 2.
+        looked at. In ``benchmarks/laser_people.py``'s scaling hall (crowd, 20 s, seed 0), MOTA with 35 / 72
+        people present was 0.867 / 0.456 with 1 and 0.825 / 0.566 with 3 (our CV Kalman: 0.866 / 0.659). At 72
+        most shared detections are a neighbour occluding a person, and merged targets place their members badly
+        [RECON]; ``cap_merges`` does better there (very dense crowds: use it instead). (These figures are with
+        the detector's ``min_cluster_points`` 1; with 2, which lost far legs, 3 helped from 35 people on: 0.735 ->
+        0.749.) The other figures above were measured with ``min_cluster_points`` 2.
+    cap_merges : bool
+        A merge takes at most as many people as its shared segment shows: ``⌈leg blobs / 2⌉`` (blobs as
+        ``blob_radius_m``), at least 2, a merged target counting its members. The targets nearest to the segment
+        (gate distance) join first; the others stay ``correlated`` (a merged target: ``merged``) and take their
+        nearest detection as such [RECON: B7 rule 1 has no limit; in a dense crowd a person hidden behind a
+        neighbour finds only the neighbour's segment, and merged targets, gating with every member, absorbed
+        chains of such people: merges of 5 to 16 people at 72 present, their members placed far from anyone].
+        **Very dense crowds: switch it on.** In ``benchmarks/laser_people.py``'s scaling hall (crowd, 20 s),
+        MOTA with 72 people present, seed 0 / 1: 0.531 / 0.522 -> 0.646 / 0.631 (our CV Kalman: 0.688 / 0.713;
+        ``n_merge`` 3 instead: 0.617 on seed 0); with 35: 0.903 / 0.881 -> 0.907 / 0.893; with 17: unchanged.
+        Off by default: where people walk in groups of three, their merges are real, and on the fusion
+        benchmark's 72 runs (crowd + groups, seeds 0-35, 30 s, laser only) it gave crowd 176 -> 155 ID switches
+        but groups 86 -> 97 (IDF1 0.891 -> 0.882).
     n_split : int
         Frames the split condition must hold before a merged target splits (hysteresis: two people side by
         side are one segment in one scan and two in the next; gaps up to ``candidate_gap_s`` do not restart
@@ -339,6 +352,7 @@ class TrackerParams:
     edge_min_age_s: float = 1.0
     edge_leave_s: float = 0.0
     n_merge: int = 1
+    cap_merges: bool = False
     n_split: int = 5
     candidate_gate_m: float = 0.5
     candidate_gap_s: float = 0.25
@@ -414,6 +428,8 @@ class TrackerParams:
             raise ConfigError(f"tracker parameter multi_fraction: expected 0..1 or None, got {self.multi_fraction!r}")
         if not 0.0 <= self.reseed_fraction <= 1.0:
             raise ConfigError(f"tracker parameter reseed_fraction: expected 0..1, got {self.reseed_fraction!r}")
+        if not isinstance(self.cap_merges, bool):
+            raise ConfigError(f"tracker parameter cap_merges: expected true or false, got {self.cap_merges!r}")
         if not isinstance(self.vehicles, bool):
             raise ConfigError(f"tracker parameter vehicles: expected true or false, got {self.vehicles!r}")
 
@@ -1179,6 +1195,8 @@ class LaserPeopleTracker:
         sf = classify_situations(c, r, found, merged_mask, edge_t, edge_d, D)
         labels = sf.target_labels
         merge_groups = sf.merge_groups
+        if p.cap_merges and merge_groups and det.points:
+            labels, merge_groups = self._cap_merges(labels, merge_groups, D, det)
         if p.n_merge > 1 and (merge_groups or self._merge_wait):
             labels, merge_groups = self._confirm_merges(sf, merge_groups, t_ns)
 
@@ -1430,6 +1448,32 @@ class LaserPeopleTracker:
         return states
 
     # ---------------------------------------------------------------------------------------------
+    def _cap_merges(self, labels: np.ndarray, groups: dict[int, np.ndarray], D: np.ndarray, det: DetectionArrays
+                    ) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+        """``cap_merges`` (see :class:`TrackerParams`): each merge group cut to the people its segment shows,
+        nearest targets first; the labels with the targets left out ``correlated`` (merged targets ``merged``)."""
+        n_w = self._id.size
+        labels = labels.copy()
+        out: dict[int, np.ndarray] = {}
+        for j, rows in groups.items():
+            points = det.points[j]
+            if points is None:  # no points to count legs on: B7 as written
+                out[j] = rows
+                continue
+            cap = max(2, -(-count_blobs(points, self.params.blob_radius_m) // 2))
+            kept: list[int] = []
+            people = 0
+            for row in rows[np.argsort(D[rows, j], kind="stable")].tolist():
+                size = 1 if row < n_w else len(self._merged[row - n_w].info)
+                if not kept or people + size <= cap:
+                    kept.append(row)
+                    people += size
+            if len(kept) >= 2:
+                out[j] = np.array(sorted(kept), np.int64)
+            left = np.setdiff1d(rows, out[j] if j in out else np.zeros(0, np.int64))
+            labels[left] = np.where(left < n_w, _CORRELATED, _MERGED)
+        return labels, out
+
     def _confirm_merges(self, sf: Any, groups: dict[int, np.ndarray], t_ns: int
                         ) -> tuple[np.ndarray, dict[int, np.ndarray]]:
         """B7 rule 1 confirmed over ``n_merge`` frames (see :class:`TrackerParams`): the groups that merge now, and
