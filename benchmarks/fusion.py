@@ -41,8 +41,9 @@ not change from one repeat to the next): a burst of load from another job then i
 Identity figures swing from run to run: on the same 30 s scenes one change to the fused tracker often turns a few
 ID switches up in one run and down in another, and 24 paired runs have pointed the wrong way (score maps: 54 ID
 switches against 50 without over crowd + groups seeds 0-11). The trackers' own random draws (``--rng``, the
-particle filters' seed; default 0) move even the 72-run totals (crowd + groups, seeds 0-35, 30 s): fusion 253 /
-244 / 260 ID switches with rng 0 / 1 / 2, laser-only 262 / 239 / 247, fusion without score maps 270 / 244 / 257.
+particle filters' seed; default 0) move even the 72-run totals (crowd + groups, seeds 0-35, 30 s): fusion 242 /
+218 / 252 / 245 ID switches with rng 0 / 1 / 2 / 3, laser-only 262 / 239 / 247 / 259 (with ``train_interval_s``
+0.2, the earlier default: fusion 253 / 244 / 260 / 256, and without score maps 270 / 244 / 257 for rng 0-2).
 Judge a change to the identities on many seeds and more than one ``--rng``; ``--skip-camera`` leaves camera-only
 out (its columns and its target then say so), which halves the time of such a run, e.g. ``--seeds $(seq 0 35)
 --skip-camera`` (about 20 minutes).

@@ -131,9 +131,10 @@ class FusionParams:
         (before B13's chromaticity colour, ``FeatureParams.colour``): the map then pulled particles towards the
         neighbour's look-alike patches and cost identities. Old detector: ``score_beta`` 1.0 instead of 0.5, the
         same switches, MOTA 0.890; 150 ``map_patches`` instead of 300: 109 switches. Over 72 runs (crowd and
-        groups, seeds 0-35) and three seeds of the particle filters' draws (rng 0, 1, 2): ID switches 253 / 244 /
-        260 with the maps, 270 / 244 / 257 without (within the draws' own spread), groups IDF1 0.914 / 0.915 /
-        0.910 with, 0.902 / 0.912 / 0.901 without (better with each rng), crowd IDF1 the same (0.933). The maps
+        groups, seeds 0-35) and three seeds of the particle filters' draws (rng 0, 1, 2), ``train_interval_s``
+        0.2: ID switches 253 / 244 / 260 with the maps, 270 / 244 / 257 without (within the draws' own spread),
+        groups IDF1 0.914 / 0.915 / 0.910 with, 0.902 / 0.912 / 0.901 without (better with each rng), crowd IDF1
+        the same (0.933). The maps
         move little per image: over crowd and groups seeds 0-2 the median spread of a target's particles is 1.6 px
         in the image against the kernel's 12 px, and the map changes their log-weights by at most 0.07 (median;
         0.19 at the 90th percentile), a nudge that adds up over frames.
@@ -217,9 +218,9 @@ class FusionParams:
         +0.02-0.10x laser-only's time. Of fusion's 17 switches on seeds 0-2, 9 are swaps between live tracks, 5
         rebirths after ``lost`` (3 of them without a classifier before this option) and 3 after ``disappear`` at
         the edge below the camera, out of its view. Off by default: one switch in twenty is within the runs'
-        noise, and it reads the camera for everybody. Over 72 runs (seeds 0-35) and rng 0 / 1 / 2: 249 / 239 / 259
-        ID switches against 253 / 244 / 260 without it, groups IDF1 0.915 / 0.922 / 0.910 against 0.914 / 0.915 /
-        0.910: still within the noise.
+        noise, and it reads the camera for everybody. Over 72 runs (seeds 0-35) and rng 0 / 1 / 2
+        (``train_interval_s`` 0.2): 249 / 239 / 259 ID switches against 253 / 244 / 260 without it, groups IDF1
+        0.915 / 0.922 / 0.910 against 0.914 / 0.915 / 0.910: still within the noise.
     reid_min_alone : float or None
         ``reid_min`` for a lost candidate whose classifier learnt alone (``learn_all_s``; fewer, less varied
         training images: its confidence on its own person is lower) [RECON]; None: ``reid_min``.
