@@ -413,7 +413,7 @@ def main() -> None:
                               f"{pf['m'].mota:.3f}", f"{r['pf_variant'].mota:.3f}", f"{kf['track_ms'][0]:.2f}",
                               f"{kf['m'].mota:.3f}")
             console.print(scale)
-            console.print("  cap_merges (a merge takes at most as many people as its segment shows leg pairs) is the "
+            console.print("  cap_merges (a merge takes at most max(2, ceil(leg blobs / 2)) people) is the "
                           "PF's setting for very dense crowds (about 70 people): there most shared detections are a "
                           "neighbour's occlusion (TrackerParams.cap_merges); at 72 people the CV Kalman still "
                           "scores higher")

@@ -666,16 +666,17 @@ def _leg_points(feet: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.concatenate([f + rng.uniform(-0.04, 0.04, (6, 2)) for f in feet])
 
 
-@pytest.mark.parametrize(("cap", "legs_of", "merged"), [(False, (1,), 3), (True, (1,), 2), (True, (0, 1, 2), 3)])
+@pytest.mark.parametrize(("cap", "legs_of", "merged", "n_merge"),
+                         [(False, (1,), 3, 1), (True, (1,), 2, 1), (True, (0, 1, 2), 3, 1), (True, (1,), 2, 3)])
 def test_cap_merges_takes_no_more_people_than_the_segment_shows(cap: bool, legs_of: tuple[int, ...],
-                                                                merged: int) -> None:
+                                                                merged: int, n_merge: int) -> None:
     """Three walkers abreast (0.55 and 0.7 m from the middle one) are seen for 0.6 s as one segment at the middle
     one, holding the legs of ``legs_of``: every target finds only that segment (B7 rule 1: one merge of three).
     With ``cap_merges`` a merge takes at most ⌈leg blobs / 2⌉ people (at least 2), nearest first: the legs of one
     person merge the middle walker and the nearer neighbour, and the farther one stays correlated; the legs of
-    three merge all three."""
+    three merge all three. The same when merges are confirmed over 3 frames (``n_merge``)."""
     rng = np.random.default_rng(11)
-    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0, cap_merges=cap)
+    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0, cap_merges=cap, n_merge=n_merge)
     n = 3 * 25
     ys = (4.45, 5.0, 5.7)
     walks = [_walk(n, np.array([2.0, y]), np.zeros(n), 1.2, 1.4, phase0=1.1 * w) for w, y in enumerate(ys)]

@@ -221,17 +221,19 @@ class TrackerParams:
         IDSW over tracker seeds 0-2: crowd 0.886/0.874/43 -> 0.877/0.873/50, groups 0.927/0.903/4.7 ->
         0.942/0.938/3.3; but the fusion tests built on the laser tracker's splits of one side-by-side pair
         (appearance-decided splits, the identity check) lose the splits they need, so it is off until they are
-        looked at. In ``benchmarks/laser_people.py``'s scaling hall (crowd, 20 s, seed 0), MOTA with 35 / 72
-        people present was 0.867 / 0.456 with 1 and 0.825 / 0.566 with 3 (our CV Kalman: 0.866 / 0.659). At 72
-        most shared detections are a neighbour occluding a person, and merged targets place their members badly
-        [RECON]; ``cap_merges`` does better there (very dense crowds: use it instead). (These figures are with
-        the detector's ``min_cluster_points`` 1; with 2, which lost far legs, 3 helped from 35 people on: 0.735 ->
-        0.749.) The other figures above were measured with ``min_cluster_points`` 2.
+        looked at. In ``benchmarks/laser_people.py``'s scaling hall (crowd, 20 s, seed 0), before the detector
+        kept rigid objects whole, MOTA with 35 / 72 people present was 0.867 / 0.456 with 1 and 0.825 / 0.566
+        with 3 (our CV Kalman: 0.866 / 0.659); now 0.903 / 0.531 with 1 and 0.858 / 0.617 with 3 (Kalman
+        0.896 / 0.688). At 72 most shared detections are a neighbour occluding a person, and merged targets place
+        their members badly [RECON]; ``cap_merges`` does better there (very dense crowds: use it instead). (These
+        figures are with the detector's ``min_cluster_points`` 1; with 2, which lost far legs, 3 helped from 35
+        people on: 0.735 -> 0.749.) The other figures above were measured with ``min_cluster_points`` 2.
     cap_merges : bool
         A merge takes at most as many people as its shared segment shows: ``⌈leg blobs / 2⌉`` (blobs as
         ``blob_radius_m``), at least 2, a merged target counting its members. The targets nearest to the segment
-        (gate distance) join first; the others stay ``correlated`` (a merged target: ``merged``) and take their
-        nearest detection as such [RECON: B7 rule 1 has no limit; in a dense crowd a person hidden behind a
+        (gate distance) join first, each if it still fits (a farther walker may join where a nearer merged target
+        did not fit); the others stay ``correlated`` (a merged target: ``merged``) and take their nearest
+        detection as such [RECON: B7 rule 1 has no limit; in a dense crowd a person hidden behind a
         neighbour finds only the neighbour's segment, and merged targets, gating with every member, absorbed
         chains of such people: merges of 5 to 16 people at 72 present, their members placed far from anyone].
         **Very dense crowds: switch it on.** In ``benchmarks/laser_people.py``'s scaling hall (crowd, 20 s),
@@ -1200,7 +1202,7 @@ class LaserPeopleTracker:
         if p.cap_merges and merge_groups and det.points:
             labels, merge_groups = self._cap_merges(labels, merge_groups, D, det)
         if p.n_merge > 1 and (merge_groups or self._merge_wait):
-            labels, merge_groups = self._confirm_merges(sf, merge_groups, t_ns)
+            labels, merge_groups = self._confirm_merges(sf, labels, merge_groups, t_ns)
 
         # ---- one detection per target (B10 nearest neighbour, one-to-one by Hungarian when contested)
         want = _WANTS_DETECTION[labels]  # NONCORRELATED, CORRELATED or MERGED
@@ -1472,17 +1474,18 @@ class LaserPeopleTracker:
                     people += size
             if len(kept) >= 2:
                 out[j] = np.array(sorted(kept), np.int64)
-            left = np.setdiff1d(rows, out[j] if j in out else np.zeros(0, np.int64))
+            left = np.setdiff1d(rows, out.get(j, _NO_INDEX))
             labels[left] = np.where(left < n_w, _CORRELATED, _MERGED)
         return labels, out
 
-    def _confirm_merges(self, sf: Any, groups: dict[int, np.ndarray], t_ns: int
+    def _confirm_merges(self, sf: Any, labels: np.ndarray, groups: dict[int, np.ndarray], t_ns: int
                         ) -> tuple[np.ndarray, dict[int, np.ndarray]]:
         """B7 rule 1 confirmed over ``n_merge`` frames (see :class:`TrackerParams`): the groups that merge now, and
-        the labels with the waiting groups' walking targets ``correlated`` (merged targets stay ``merged``)."""
+        ``labels`` (a copy) with the waiting groups' walking targets ``correlated`` (merged targets stay
+        ``merged``)."""
         n_w = self._id.size
         ids_of = [(int(t),) for t in self._id.tolist()] + [tuple(m.ids) for m in self._merged]
-        labels = sf.target_labels.copy()
+        labels = labels.copy()
         need, gap = self._frames_ns(self.params.n_merge - 1), self._cand.gap_ns
         wait = self._merge_wait
         now, out = set(), {}
