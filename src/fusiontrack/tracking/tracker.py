@@ -238,7 +238,7 @@ class TrackerParams:
         chains of such people: merges of 5 to 16 people at 72 present, their members placed far from anyone].
         **Very dense crowds: switch it on.** In ``benchmarks/laser_people.py``'s scaling hall (crowd, 20 s),
         MOTA with 72 people present, seed 0 / 1: 0.531 / 0.522 -> 0.646 / 0.631 (our CV Kalman: 0.688 / 0.713;
-        ``n_merge`` 3 instead: 0.617 on seed 0); with 35: 0.903 / 0.881 -> 0.907 / 0.893; with 17: unchanged.
+        ``n_merge`` 3 instead: 0.617 on seed 0); with 35: 0.903 / 0.881 -> 0.907 / 0.893; with 17 (seed 0): the same.
         Off by default: where people walk in groups of three, or one hides behind a pair, their merges are real.
         On the fusion benchmark's 72 runs (crowd + groups, seeds 0-35, 30 s, laser only) with the particle
         filters' seeds 0 / 1 / 2: crowd 176 / 154 / 167 -> 155 / 153 / 154 ID switches (IDF1 +0.002), groups
