@@ -700,3 +700,37 @@ def test_cap_merges_takes_no_more_people_than_the_segment_shows(cap: bool, legs_
     if merged == 2:
         assert set(merges[0].track_ids) == {1, 2}  # the middle walker and its nearer neighbour
         assert far_situations == {Situation.CORRELATED}
+
+
+def test_merged_pair_seen_apart_splits_when_a_neighbours_gate_holds_one_piece() -> None:
+    """Three walkers side by side, 0.66 m and 0.6 m apart: the outer two (B, C) are seen as one segment for 0.6 s
+    and merge, then each in its own segment again, B's within reach of the third walker A's gate. B7 rule 2 splits
+    a merged target whose detections it alone found; here A's gate holds B's, so only the seen-apart completion
+    splits it: both come back as walking tracks on their own people, and A's track stays on A."""
+    rng = np.random.default_rng(5)
+    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0)
+    n = 6 * 25
+    ys = (4.34, 5.0, 5.6)  # A, B, C
+    walks = [_walk(n, np.array([2.0, y]), np.zeros(n), 0.8, 1.2, phase0=1.3 * w) for w, y in enumerate(ys)]
+    merged_ids, apart_states = set(), []
+    for k in range(n):
+        t_ns = k * FRAME_NS
+        if 40 <= k < 55:  # B and C in one segment at their middle
+            feet = np.concatenate([walks[1][1][k], walks[2][1][k]])
+            centre = 0.5 * (walks[1][0][k] + walks[2][0][k])
+            dets = [_detection(t_ns, walks[0][1][k], rng), Detection(t_ns, "laser", position_m=centre, features={
+                "feet_m": 0.5 * (walks[1][1][k] + walks[2][1][k]), "inter_feet_m": np.asarray(0.2),
+                "one_foot": np.asarray(False), "points_m": _leg_points(feet, rng)})]
+        else:
+            dets = [_detection(t_ns, walks[w][1][k], rng) for w in range(3)]
+        states = trk.step(t_ns, dets)
+        merged_ids |= {i for e in trk.events if e.kind == "merge" for i in e.track_ids}
+        if k >= 100:
+            apart_states.append((k, states))
+    assert merged_ids == {2, 3}  # B and C merged
+    for k, states in apart_states:  # 1.8 s after they are seen apart again: each walker its own track, walking
+        by_id = {s.track_id: s for s in states}
+        assert set(by_id) == {1, 2, 3}
+        for tid, w in ((1, 0), (2, 1), (3, 2)):
+            assert np.hypot(*(by_id[tid].position_m - walks[w][0][k])) < 0.25, (k, tid)
+            assert by_id[tid].situation != Situation.MERGED
