@@ -256,6 +256,17 @@ def test_bad_traffic_settings_are_named():
         assert getattr(TrafficParams.from_mapping({name: 3}), name) == 3
 
 
+def test_every_traffic_key_of_a_pipeline_file_is_read():
+    """Each plain [traffic] key reaches TrafficParams (prime_lasers was accepted and then ignored)."""
+    values = {"rate_hz": 10.0, "roi_margin_m": 3.0, "camera_every": 3, "laser_every": 1, "workers": 0,
+              "prime_lasers": True, "laser": {"fg_alpha": 0.01}, "camera": {"history": 50},
+              "kalman": {"q": 1.0, "r_m": 0.2, "gate_m": 2.0}}
+    got = TrafficParams.from_mapping(values)
+    for name, value in values.items():
+        assert getattr(got, name) == value, name
+    assert TrafficParams.from_mapping({}) == TrafficParams()
+
+
 def test_an_unknown_camera_setting_is_named(road):
     with pytest.raises(ConfigError, match=r"traffic\.camera: unknown key\(s\) \['background_every'\]"):
         track_traffic(road[0], params=TrafficParams(camera={"background_every": 4}))

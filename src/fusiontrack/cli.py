@@ -228,6 +228,13 @@ def _check_laser_tables(cfg: Any, config: Path | None, tracker_kind: str) -> Non
             TrackerParams().replace(**cfg.tracking)
         except ConfigError as err:
             raise ConfigError(f"{where}[tracking]: {err}") from None
+    elif cfg.tracking and tracker_kind == "kalman":
+        from .tracking.online import make_tracker
+
+        try:
+            make_tracker("kalman", cfg.tracking, None, None)
+        except ConfigError as err:
+            raise ConfigError(f"{where}[tracking] with --tracker kalman: {err}") from None
 
 
 @app.command()

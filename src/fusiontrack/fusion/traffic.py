@@ -145,9 +145,9 @@ class TrafficParams:
         unknown = sorted(set(values) - names)
         if unknown:
             raise ConfigError(f"{source}: unknown key(s) {unknown}; expected some of {sorted(names)}")
-        kw: dict[str, Any] = {k: v for k, v in values.items() if k in ("rate_hz", "roi_margin_m", "kalman",
-                                                                      "laser", "camera", "camera_every",
-                                                                      "laser_every", "workers")}
+        # every key but the two sub-tables read into their own types goes through as it is (a key left out of a
+        # list here was accepted and then silently ignored: prime_lasers was)
+        kw: dict[str, Any] = {k: v for k, v in values.items() if k not in ("fusion", "tracker")}
         if "fusion" in values:
             kw["fusion"] = as_params(dict(values["fusion"]), f"{source}.fusion")
         if "tracker" in values:

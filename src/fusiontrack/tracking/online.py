@@ -17,6 +17,7 @@ are learnt online, as ``track_recording(..., background="learn")`` does.
 
 from __future__ import annotations
 
+import inspect
 import logging
 import time
 from collections.abc import Mapping
@@ -198,4 +199,10 @@ def make_tracker(tracker: str, params: Any, area_m: Any, rng: np.random.Generato
     area = None if isinstance(area_m, str) else area_m
     if tracker == "pf":
         return LaserPeopleTracker(params, area_m=area, rng=rng)
-    return CVKalmanTracker(**{"area_m": area, **dict(params or {})})
+    kw = dict(params or {})
+    allowed = set(inspect.signature(CVKalmanTracker).parameters) - {"area_m", "ids"}
+    unknown = sorted(set(kw) - allowed)
+    if unknown:  # e.g. a pipeline file's [tracking] table written for the particle filter
+        raise ConfigError(f"unknown CV Kalman parameter(s) {unknown} (the particle filter's?); the Kalman baseline "
+                          f"takes {sorted(allowed)}")
+    return CVKalmanTracker(**{"area_m": area, **kw})
