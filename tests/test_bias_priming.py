@@ -202,3 +202,33 @@ def test_bad_priming_calls_name_the_argument(crowd):
     est.observe_scan(scans[0])
     with pytest.raises(ValueError, match="prime"):  # priming comes before the first scan
         est.prime(iter(scans))
+
+
+def test_a_repeated_camera_frame_is_skipped_and_the_bias_still_learnt(crowd, monkeypatch, caplog):
+    """One camera frame delivered twice (a driver's hiccup) is skipped with a warning: the pass goes on and settles
+    at the simulator's 3 degrees (it used to end the pass: the blob tracker's frames must advance)."""
+    from fusiontrack.calibration.bias_run import FrameObjects
+    from fusiontrack.types import Image
+
+    original = Recording.messages
+
+    def repeat_fifth_image(self, *args, **kwargs):
+        n = 0
+        for msg in original(self, *args, **kwargs):
+            yield msg
+            if isinstance(msg, Image):
+                n += 1
+                if n == 5:
+                    yield msg
+
+    monkeypatch.setattr(Recording, "messages", repeat_fifth_image)
+    corrections = {k: -round(v * 1e6) for k, v in crowd["offsets_ms"].items()}
+    with caplog.at_level("WARNING"):
+        bias = learn_camera_bias(crowd["path"], "camera_0", clock_corrections_ns=corrections, background="prime")
+    assert bias.settled
+    assert math.degrees(bias.bias_rad) == pytest.approx(YAW_ERROR_DEG, abs=0.15)
+    inputs = open_bias_inputs(crowd["path"], "camera_0", clock_offsets_ms=crowd["offsets_ms"])
+    with caplog.at_level("WARNING"):
+        frames = [x for x in inputs if isinstance(x, FrameObjects)]
+    assert np.all(np.diff([f.t_ns for f in frames]) > 0)
+    assert "1 frame(s) not after the previous one skipped" in caplog.text

@@ -366,6 +366,20 @@ class BiasInputs:
                                     np.array([not o.in_group and o.missed == 0 for o in objs], bool),
                                     f * (centres + PIXEL_EDGE_OFFSET_PX) - PIXEL_EDGE_OFFSET_PX)
 
+            last_frame, skipped = [-(2**62)], [0]
+
+            def in_order(msg: Image | GroundTruth) -> bool:
+                # a repeated or out-of-order frame is skipped (the blob tracker's frames must advance): one bad
+                # frame must not end the pass
+                t = frame_time(msg)
+                if t <= last_frame[0]:
+                    skipped[0] += 1
+                    log.debug("%s: frame at %d ns is not after the previous one (%d ns); skipped", frame_topic, t,
+                              last_frame[0])
+                    return False
+                last_frame[0] = t
+                return True
+
             for msg in rec.messages([frame_topic, *self.scan_topics.values()]):
                 if isinstance(msg, LaserScan):
                     t = msg.t_ns - self.offsets_ns.get(msg.sensor, 0)
@@ -374,11 +388,17 @@ class BiasInputs:
                     last_scan[msg.sensor] = t
                     ready = min(last_scan.values())
                     while pending and frame_time(pending[0]) <= ready:
-                        yield objects(pending.popleft())
+                        frame = pending.popleft()
+                        if in_order(frame):
+                            yield objects(frame)
                 elif isinstance(msg, Image | GroundTruth):
                     pending.append(msg)
             while pending:
-                yield objects(pending.popleft())
+                frame = pending.popleft()
+                if in_order(frame):
+                    yield objects(frame)
+            if skipped[0]:
+                log.warning("%s: %d frame(s) not after the previous one skipped", frame_topic, skipped[0])
 
 
 def open_bias_inputs(path: str | Path, camera: str = "camera_0", lasers: Sequence[str] | None = None, *,
