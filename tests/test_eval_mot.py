@@ -367,6 +367,19 @@ def test_match_is_exactly_distance_at_most_threshold() -> None:
     assert s[0, 1] < 0.5 - np.finfo(float).eps  # just beyond the threshold: below TrackEval's match test
 
 
+def test_a_track_without_a_floor_position_matches_nobody() -> None:
+    """States whose position is NaN or infinite (a camera track with no floor calibration) are scored as false
+    positives beside the others, not a crash of the assignment."""
+    xy = _walk()
+    states = _states(xy, np.tile([100, 200], (10, 1)))
+    lost = [TrackState(t_ns=T0_NS + k * DT_NS, sensor="tracker", track_id=99,
+                       position_m=(np.nan, np.nan) if k % 2 else (np.inf, 0.0)) for k in range(3, 7)]
+    m = evaluate_floor(_gt(xy), states + lost)
+    ref = evaluate_floor(_gt(xy), states)
+    assert (m.tp, m.fn, m.id_switches) == (ref.tp, ref.fn, ref.id_switches)
+    assert m.fp == ref.fp + 4
+
+
 def test_spurious_track_counts_as_false_positives() -> None:
     xy = _walk()
     states = _states(xy, np.tile([100, 200], (10, 1)))

@@ -407,6 +407,7 @@ def floor_similarity(gt_xy_m: np.ndarray, track_xy_m: np.ndarray, threshold_m: f
     a = np.asarray(gt_xy_m, dtype=np.float64).reshape(-1, 2)
     b = np.asarray(track_xy_m, dtype=np.float64).reshape(-1, 2)
     d = np.linalg.norm(a[:, None, :] - b[None, :, :], axis=2)
+    d[~np.isfinite(d)] = np.inf  # a position that is NaN (a camera track without a floor) matches nothing
     sim = np.maximum(0.0, 1.0 - d / (2.0 * threshold_m))  # TrackEval's formula, zero_distance = 2 threshold
     return np.where(d > threshold_m, np.minimum(sim, _BELOW_MATCH), sim)
 
