@@ -153,6 +153,12 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         (["track", "{demo}", "-o", "{out}", "-c", "{laser_neg}"], "[laser]: min_segment_points: expected an integer"),
         (["track", "{demo}", "-o", "{out}", "-c", "{laser_text}"], "[laser]: alpha: expected a number, got 'x'"),
         (["track", "{demo}", "-o", "{out}", "-c", "{tracking_typo}"], "tracking_typo.toml: [tracking]: unknown"),
+        # numbers that are not finite, and a negative seed: the setting named, no traceback
+        (["simulate", "crowd", "-o", "{out}", "--seconds", "inf"], "scenario.duration_s: Input should be a finite"),
+        (["simulate", "crowd", "-o", "{out}", "--seconds", "1", "--seed", "-1"],
+         "scenario.seed: Input should be greater than or equal to 0"),
+        (["track", "{demo}", "-o", "{out}", "-c", "{offset_inf}"],
+         "offset_inf.toml: sensors.l0.clock_offset_ms: Input should be a finite number"),
         (["track", "{demo}", "-o", "{out}", "-c", "{tracking_pf}", "--tracker", "kalman"],
          "tracking_pf.toml: [tracking] with --tracker kalman: unknown CV Kalman parameter(s) ['cap_merges']"),
         # outputs of the wrong kind, named
@@ -187,7 +193,8 @@ def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args
     junk.write_bytes(b"\x00" * 100)
     tables = {"laser_typo": "[laser]\nmin_segmnt_points = 10\n", "laser_neg": "[laser]\nmin_segment_points = -5\n",
               "laser_text": "[laser]\nalpha = 'x'\n", "tracking_typo": "[tracking]\nnum_particles = 10\n",
-              "tracking_pf": "[tracking]\ncap_merges = true\n"}
+              "tracking_pf": "[tracking]\ncap_merges = true\n",
+              "offset_inf": '[sensors.l0]\nkind = "laser"\ntopic = "/scan"\nclock_offset_ms = inf\n'}
     for name, text in tables.items():
         (tmp_path / f"{name}.toml").write_text(text)
     (tmp_path / "a_file").write_text("")

@@ -35,7 +35,8 @@ from .errors import ConfigError
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # a pipeline file's numbers are finite: inf or nan in a pose, a clock offset or a window is a mistake
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class SensorKind(StrEnum):

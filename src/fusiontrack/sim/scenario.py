@@ -148,8 +148,8 @@ class PhoneConfig(TimingConfig):
 
 class Header(_Model):
     description: str = ""
-    duration_s: float = Field(30.0, gt=0)
-    seed: int = 0
+    duration_s: float = Field(30.0, gt=0, allow_inf_nan=False)
+    seed: int = Field(0, ge=0)
     step_hz: float = Field(100.0, gt=0, description="internal rate of the agents' motion")
     ground_truth_hz: float = Field(25.0, gt=0)
 
