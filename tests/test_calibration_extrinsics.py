@@ -198,8 +198,10 @@ def test_update_pipeline_pose_bad_input():
         update_pipeline_pose("[sensors.camera_0\n", "camera_0", pose)
     with pytest.raises(ConfigError, match=r"sensors\.camera_0\.kind"):
         update_pipeline_pose(PIPELINE.replace('kind = "camera"', 'kind = "kamera"'), "camera_0", pose)
-    with pytest.raises(ConfigError, match="finite"):
-        update_pipeline_pose(PIPELINE, "camera_0", Pose(x=math.inf))
+    with pytest.raises(ValueError, match="finite"):  # the model refuses it (pydantic's ValidationError) ...
+        Pose(x=math.inf)
+    with pytest.raises(ConfigError, match="finite"):  # ... and so does the writer, given one built unchecked
+        update_pipeline_pose(PIPELINE, "camera_0", Pose.model_construct(x=math.inf))
     with pytest.raises(ConfigError, match="inline"):
         update_pipeline_pose('[sensors]\ncam = { kind = "camera", topic = "/c" }\n', "cam", pose)
 
