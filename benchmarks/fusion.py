@@ -10,8 +10,8 @@ another (no parallel load on the timings):
   not settle), scored on the truth frames nearest to its 15 Hz images (:func:`fusiontrack.eval.truth_at`; against
   every 25 Hz truth frame, two in five would have no camera report and count everybody as missed);
 * fusion: :func:`fusiontrack.fusion.track_fused` (the same laser tracker + per-target classifiers: B15
-  learning, B16 score maps weighting the particles of targets close to each other, re-identification of reborn
-  tracks, identity checks after close contacts; B17 identities at splits are off by default, see
+  learning, re-identification of reborn tracks, identity checks after close contacts; B16 score maps weighting
+  the particles of targets close to each other and B17 identities at splits are off by default, see
   :class:`~fusiontrack.fusion.FusionParams`), through the camera
   corrected by the horizontal bias it learns first over the beginning of the recording (seed 000; ``crowd``'s
   camera is 3 degrees off its calibration; ``--no-bias``: through the camera as calibrated). The learnt bias of

@@ -116,7 +116,14 @@ class FusionParams:
         0.05 s; IDF1 within the seeds' spread (means: crowd 0.935 against 0.934, groups 0.912 against 0.912); the
         same CPU time (crowd and groups seeds 0-2: 1.39x / 1.59x laser-only's with 0.1 s, 1.39x / 1.63x with 0.2).
     score_map : bool
-        B16 on (score-map observation of correlated targets). On by default. With the laser detector's
+        B16 on (score-map observation of correlated targets). Off by default since the laser tracker splits a
+        merged target seen apart (:class:`~fusiontrack.tracking.LaserPeopleTracker`): over 72 runs (crowd and
+        groups, seeds 0-35, 30 s) with rng 0 / 1, ID switches crowd 154 / 161 with the maps, 145 / 150 without;
+        groups 56 / 40 with, 27 / 35 without (laser-only 23 with rng 0); IDF1 crowd 0.929 / 0.934 with, 0.933 /
+        0.935 without, groups 0.948 / 0.961 with, 0.968 / 0.958 without; and the maps cost about 0.1x
+        laser-only's time. The maps' small pulls on a target's particles change which draws survive, and the
+        tracker, now steady on its own, loses more to that than the maps win back. Before that change (the
+        figures below) the maps helped groups. With the laser detector's
         ``min_cluster_points`` 2 (before session 25), on ``benchmarks/fusion.py``'s scenes (crowd and groups, seeds
         0-11, 30 s each, paired with the same runs without it) it cut ID switches from 117 to 99 and raised IDF1
         from 0.880 to 0.898 and MOTA from 0.885 to 0.899 (IDF1 better in 14 runs of 24, worse in 8; the largest
@@ -234,7 +241,7 @@ class FusionParams:
 
     d_train_m: float = 1.5
     train_interval_s: float = 0.1
-    score_map: bool = True
+    score_map: bool = False
     score_beta: float = 0.5
     group_m: float = 1.0
     split_identity: bool = False
