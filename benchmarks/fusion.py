@@ -41,9 +41,12 @@ not change from one repeat to the next): a burst of load from another job then i
 Identity figures swing from run to run: on the same 30 s scenes one change to the fused tracker often turns a few
 ID switches up in one run and down in another, and 24 paired runs have pointed the wrong way (score maps: 54 ID
 switches against 50 without over crowd + groups seeds 0-11). The trackers' own random draws (``--rng``, the
-particle filters' seed; default 0) move even the 72-run totals (crowd + groups, seeds 0-35, 30 s): fusion 242 /
-218 / 252 / 245 ID switches with rng 0 / 1 / 2 / 3, laser-only 262 / 239 / 247 / 259 (with ``train_interval_s``
-0.2, the earlier default: fusion 253 / 244 / 260 / 256, and without score maps 270 / 244 / 257 for rng 0-2).
+particle filters' seed; default 0) move even the 72-run totals (crowd + groups, seeds 0-35, 30 s). Since the laser
+tracker splits a merged target seen apart (score maps then off by default): fusion 172 / 185 ID switches with
+rng 0 / 1, laser-only 169 / 184 (with the maps: 210 / 201). Before: fusion 242 / 218 / 252 / 245 with rng 0-3,
+laser-only 262 / 239 / 247 / 259; and one scene alone, groups seed 0, scored laser-only IDF1 0.78 to 0.99 over
+rng 0-9 (0.80 to 0.99 after; its failure was two people standing 0.6 m apart, see
+:class:`~fusiontrack.tracking.LaserPeopleTracker`).
 Judge a change to the identities on many seeds and more than one ``--rng``; ``--skip-camera`` leaves camera-only
 out (its columns and its target then say so), which halves the time of such a run, e.g. ``--seeds $(seq 0 35)
 --skip-camera`` (about 20 minutes).
