@@ -797,13 +797,14 @@ def _pair_d2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return dx
 
 
-def _own_detections(D: np.ndarray, found: np.ndarray, row: int) -> int:
-    """How many of the detections target ``row`` found are nearer to it than to any other target that found them
-    (``D``: gate distances, targets x detections; ``found``: ``D < G``, so a NaN distance is no candidate)."""
+def _own_detections(D: np.ndarray, found: np.ndarray, row: int) -> np.ndarray:
+    """The detections target ``row`` found that are nearer to it than to any other target that found them, in
+    index order (``D``: gate distances, targets x detections; ``found``: ``D < G``, so a NaN distance is no
+    candidate)."""
     js = found[row].nonzero()[0]
     if not js.size:
-        return 0
-    return int(np.count_nonzero(np.where(found[:, js], D[:, js], np.inf).argmin(axis=0) == row))
+        return js
+    return js[np.where(found[:, js], D[:, js], np.inf).argmin(axis=0) == row]
 
 
 def _max_pair_distance(points: np.ndarray) -> float:
@@ -1279,10 +1280,8 @@ class LaserPeopleTracker:
                 # neighbour's gate often holds one: two people standing 0.6 m apart stayed merged for seconds, one
                 # member's estimate left behind while the neighbour's track took its person's legs (72 runs, 30 s,
                 # laser-only: groups ID switches 86 -> 23, crowd 176 -> 146)
-                js_f = found[row].nonzero()[0]
-                mine = (np.where(found[:, js_f], D[:, js_f], np.inf).argmin(axis=0) == row).tolist()
                 others = set(np.delete(assigned, row).tolist())
-                own = [j for j, ok in zip(js_f.tolist(), mine, strict=True) if ok and j not in others]
+                own = [j for j in _own_detections(D, found, row).tolist() if j not in others]
                 if len(own) >= len(m.info):
                     js = np.array(own, np.int64)
             if js is not None:
@@ -1409,7 +1408,7 @@ class LaserPeopleTracker:
             # nearer to it than to any other target as it has members, when another target found one of them too):
             # the members are seen apart, correlated (B7 rule 3), while the merged target holds
             seen_apart = lab == _SPLITTING or (lab == _MERGED and c[n_w + i] == 2
-                                               and _own_detections(D, found, n_w + i) >= len(m.info))
+                                               and _own_detections(D, found, n_w + i).size >= len(m.info))
             if seen_apart:
                 sit = _CORRELATED_S
             elif lab == _DISAPPEARING and leaving_m[i]:
