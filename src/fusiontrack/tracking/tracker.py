@@ -1265,6 +1265,7 @@ class LaserPeopleTracker:
         # ---- merged targets: members from the segment points, Kalman update on the centre
         split_now: list[int] = []
         split_dets: dict[int, np.ndarray] = {}  # the detections each splitting merged target splits into
+        apart = np.zeros(n_m, bool)  # merged targets seen apart this step (rule 2's split, or its completion)
         dissolve: list[tuple[int, int]] = []
         sensed_m = np.zeros(n_m, bool)
         for i, m in enumerate(merged):
@@ -1285,6 +1286,7 @@ class LaserPeopleTracker:
                 if len(own) >= len(m.info):
                     js = np.array(own, np.int64)
             if js is not None:
+                apart[i] = True
                 if m.split_since == 0:
                     m.split_since = t_ns
                 m.split_last = t_ns
@@ -1405,10 +1407,9 @@ class LaserPeopleTracker:
             m = merged[i]
             lab = int(labels[n_w + i])
             # its gate holds detections enough for its members (B7 rule 2's split condition, or as many detections
-            # nearer to it than to any other target as it has members, when another target found one of them too):
-            # the members are seen apart, correlated (B7 rule 3), while the merged target holds
-            seen_apart = lab == _SPLITTING or (lab == _MERGED and c[n_w + i] == 2
-                                               and _own_detections(D, found, n_w + i).size >= len(m.info))
+            # nearer to it than to any other target, and assigned to no other, as it has members: the same test as
+            # its split's above): the members are seen apart, correlated (B7 rule 3), while the merged target holds
+            seen_apart = bool(apart[i])
             if seen_apart:
                 sit = _CORRELATED_S
             elif lab == _DISAPPEARING and leaving_m[i]:
