@@ -1263,8 +1263,7 @@ class LaserPeopleTracker:
         self._track_velocity(pos, dt)
 
         # ---- merged targets: members from the segment points, Kalman update on the centre
-        split_now: list[int] = []
-        split_dets: dict[int, np.ndarray] = {}  # the detections each splitting merged target splits into
+        split_now: dict[int, np.ndarray] = {}  # merged targets that split now -> the detections they split into
         apart = np.zeros(n_m, bool)  # merged targets seen apart this step (rule 2's split, or its completion)
         dissolve: list[tuple[int, int]] = []
         sensed_m = np.zeros(n_m, bool)
@@ -1292,8 +1291,7 @@ class LaserPeopleTracker:
                 m.split_last = t_ns
                 if (t_ns - m.split_since >= self._frames_ns(p.n_split - 1) and len(m.info) >= 2
                         and _max_pair_distance(det.centres[js]) >= p.split_min_m):
-                    split_now.append(i)
-                    split_dets[i] = js
+                    split_now[i] = js
                     claimed[js] = True
             else:
                 a = int(assigned[row])
@@ -1360,9 +1358,9 @@ class LaserPeopleTracker:
                     new_merged.append(self._merge(group, j, det, t_ns, gone_w, gone_m))
 
         # ---- splits (B7 rule 2, B17): identity recovery by motion
-        for i in split_now:
+        for i, js in split_now.items():
             if not gone_m[i]:
-                self._split(merged[i], split_dets[i], det, t_ns, new_merged, new_walkers)
+                self._split(merged[i], js, det, t_ns, new_merged, new_walkers)
                 gone_m[i] = True
 
         # ---- merged targets that hold one person only: the member nearest to it goes on, the others end
