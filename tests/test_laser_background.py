@@ -183,6 +183,50 @@ def test_beam_count_change_resets_with_warning(caplog: pytest.LogCaptureFixture)
     assert bg.update(np.zeros(0)).shape == (0,)  # an empty scan does not crash either
 
 
+def test_new_geometry_takes_the_background_of_the_nearest_old_beams() -> None:
+    """Known answer: a room whose range is a known function of the beam angle. At a new geometry each beam's
+    background is the old one at the nearest angle (within half a beam); beams outside the old field of view have
+    none until they see something; back at the old geometry its background resumes unchanged."""
+    wall = lambda a: 3.0 + np.cos(a)  # noqa: E731 - the room's range at angle a
+    a720 = -2.0 + 0.005 * np.arange(720)
+    bg = BeamBackground(720, n_init=5)
+    assert bg.set_geometry(720, -2.0, 0.005) == "same"
+    _learn(bg, np.tile(wall(a720), (5, 1)))
+    assert bg.set_geometry(500, -1.0, 0.007) == "resampled"  # 500 beams from -1.0 to 2.493 rad
+    a500 = -1.0 + 0.007 * np.arange(500)
+    inside = a500 <= a720[-1] + 0.0035
+    assert bg.initialised
+    assert bg.n_beams == 500
+    np.testing.assert_allclose(bg.background_m[inside], wall(a500[inside]), atol=0.0035)  # |d wall/da| <= 1
+    assert np.isnan(bg.background_m[~inside]).all()
+    fg = bg.update(np.r_[wall(a500[:10]) - 1.0, wall(a500[10:])])  # someone 1 m in front of the first 10
+    assert fg.tolist() == [True] * 10 + [False] * 490
+    assert bg.set_geometry(720, -2.0, 0.005) == "resumed"
+    np.testing.assert_allclose(bg.background_m, wall(a720), atol=1e-6)
+    assert bg.set_geometry(500, -1.0, 0.007) == "resumed"
+    assert bg.resets == 0
+
+
+def test_new_geometry_before_initialisation_learns_from_scratch() -> None:
+    bg = BeamBackground(10, n_init=5)
+    _learn(bg, np.full((3, 10), 3.0))
+    assert bg.set_geometry(12, 0.0, 0.1) == "new"
+    assert not bg.initialised
+    assert bg.resets == 1
+    _learn(bg, np.full((5, 12), 3.0))
+    assert bg.update(np.r_[np.full(11, 3.0), 1.0]).tolist() == [False] * 11 + [True]
+
+
+def test_geometries_kept_are_bounded() -> None:
+    bg = BeamBackground(10, n_init=1)
+    bg.set_geometry(10, 0.0, 0.1)
+    _learn(bg, np.full((1, 10), 3.0))
+    for n in range(11, 11 + 2 * BeamBackground.max_geometries):
+        assert bg.set_geometry(n, 0.0, 0.1) == "resampled"
+    assert len(bg._saved) == BeamBackground.max_geometries - 1
+    assert bg.set_geometry(10, 0.0, 0.1) == "resampled"  # forgotten, carried over again
+
+
 def test_nothing_is_foreground_before_initialisation() -> None:
     bg = BeamBackground(5, n_init=10)
     for i in range(9):

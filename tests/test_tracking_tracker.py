@@ -483,12 +483,15 @@ def test_nan_inf_and_zero_ranges_do_not_stop_tracking() -> None:
     assert all(len(states) == 1 for states in out[60:66])  # coasts through the empty scans
 
 
-def test_a_change_of_beam_count_does_not_stop_tracking(caplog: pytest.LogCaptureFixture) -> None:
+@pytest.mark.parametrize("change", ["for good", "every 7th scan"])
+def test_a_change_of_beam_count_does_not_stop_tracking(change: str, caplog: pytest.LogCaptureFixture) -> None:
     def mutate(k: int, name: str, scan: LaserScan) -> LaserScan:
-        if name == "laser_a" and k >= 40:  # laser_a switches to 540 beams and must relearn its background
-            r = scan.ranges_m
+        r = scan.ranges_m
+        if name == "laser_a" and k >= 40 and change == "for good":  # 540 beams over the same 270 degrees
             idx = np.round(np.linspace(0, r.size - 1, 540)).astype(int)
             return LaserScan(scan.t_ns, name, name, ANGLE_MIN, np.deg2rad(270.0) / 540, 0.05, 30.0, r[idx])
+        if change == "every 7th scan" and k % 7 == (0 if name == "laser_a" else 3):  # the first 100 beams only
+            return LaserScan(scan.t_ns, name, name, ANGLE_MIN, scan.angle_increment_rad, 0.05, 30.0, r[:100])
         return scan
 
     with caplog.at_level(logging.WARNING, logger="fusiontrack.laser"):

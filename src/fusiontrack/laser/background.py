@@ -36,11 +36,14 @@ from typing import Any, Literal
 
 import numpy as np
 
-__all__ = ["BeamBackground", "all_initialised", "clean_ranges", "histogram_mode", "keep_primed_backgrounds"]
+__all__ = ["BeamBackground", "all_initialised", "clean_ranges", "histogram_mode", "keep_primed_backgrounds",
+           "switch_geometry"]
 
 log = logging.getLogger(__name__)
 
 InitMethod = Literal["mode", "median"]
+Geometry = tuple[int, float, float]
+"""A scan's (beams, angle of the first beam, increment), radians."""
 
 
 def clean_ranges(ranges_m: Any, range_min_m: float = 0.0, range_max_m: float = math.inf) -> np.ndarray:
@@ -134,7 +137,8 @@ class BeamBackground:
     Parameters
     ----------
     n_beams : int
-        Beams per scan (>= 1). A scan of another length resets the model (logged warning).
+        Beams per scan (>= 1). A scan of another length resets the model (logged warning), unless
+        :meth:`set_geometry` announced it (then what was learnt is kept or carried over).
     alpha : float
         Learning rate for foreground readings (A7: 0.005, so people are not absorbed quickly).
     beta : float
@@ -157,6 +161,8 @@ class BeamBackground:
 
     Attributes
     ----------
+    max_geometries : int
+        Scan geometries whose backgrounds are kept (:meth:`set_geometry`), 4.
     background_m : (n_beams,) float64
         Current background (``NaN`` before initialisation, or for a beam that never had a return when
         ``range_max_m`` is infinite). Read-only view.
@@ -187,9 +193,72 @@ class BeamBackground:
                              f"got {range_min_m}, {range_max_m}")
         self.resets = 0
         """How many times a change of beam count reset the model."""
+        self.geometry: Geometry | None = None
+        """The scan geometry the model is for, once :meth:`set_geometry` named it."""
+        self._saved: dict[Geometry, tuple[int, np.ndarray, int, np.ndarray]] = {}
         self.reset(n_beams)
 
     # ---------------------------------------------------------------------------------------------
+    def set_geometry(self, n_beams: int, angle_min_rad: float, angle_increment_rad: float) -> str:
+        """Take scans of this geometry from now on, keeping what was learnt for the others.
+
+        A scanner may change its beam count or field of view mid-recording (a driver restart, a reconfigured
+        scanner, a corrupt header), or alternate between two. Relearning from scratch at each change would blind
+        the scanner for ``n_init`` scans every time, and for good when it alternates. Instead the model keeps one
+        background per geometry (the ``max_geometries`` most recent):
+
+        * back to a geometry seen before: its background resumes where it was left (``"resumed"``);
+        * a new geometry while the current background is initialised: each new beam takes the background of the
+          old beam nearest in angle, if one lies within half a beam (the larger of the two increments); beams
+          outside the old field of view have none and adopt their first valid reading (``"resampled"``);
+        * otherwise a new, empty model that learns from its next ``n_init`` scans (``"new"``).
+
+        Parameters
+        ----------
+        n_beams : int
+            Beams per scan (>= 1).
+        angle_min_rad, angle_increment_rad : float
+            Angle of the first beam and between beams (finite, increment non-zero).
+
+        Returns
+        -------
+        {"same", "resumed", "resampled", "new"}
+        """
+        new: Geometry = (int(n_beams), float(angle_min_rad), float(angle_increment_rad))
+        old = self.geometry
+        if new == old:
+            return "same"
+        if isinstance(n_beams, bool) or not isinstance(n_beams, int | np.integer) or n_beams < 1:
+            raise ValueError(f"n_beams: expected an integer >= 1, got {n_beams!r}")
+        if not (math.isfinite(angle_min_rad) and math.isfinite(angle_increment_rad) and angle_increment_rad != 0):
+            raise ValueError(f"beam angles: expected finite angle_min and a finite non-zero increment, got "
+                             f"{angle_min_rad}, {angle_increment_rad}")
+        if old is None and self._n_beams == new[0] and not self._saved:  # naming the geometry it was built for
+            self.geometry = new
+            return "same"
+        if old is not None:
+            self._saved[old] = (self._n_beams, self._buffer, self._n_seen, self._bg)
+        self.geometry = new
+        if new in self._saved:
+            self._n_beams, self._buffer, self._n_seen, self._bg = self._saved.pop(new)
+            return "resumed"
+        while len(self._saved) > self.max_geometries - 1:
+            self._saved.pop(next(iter(self._saved)))  # the oldest
+        if old is not None and self.initialised:
+            a_old = old[1] + old[2] * np.arange(old[0])
+            a_new = new[1] + new[2] * np.arange(new[0])
+            j = np.rint((a_new - old[1]) / old[2]).astype(np.int64)
+            inside = (j >= 0) & (j < old[0])
+            j = j.clip(0, old[0] - 1)
+            inside &= np.abs(a_old[j] - a_new) <= 0.5 * max(abs(old[2]), abs(new[2])) + 1e-12
+            self._n_beams = new[0]
+            self._buffer = np.empty((0, new[0]), dtype=np.float32)
+            self._bg = np.where(inside, self._bg[j], np.nan)
+            return "resampled"
+        self.resets += 1
+        self.reset(new[0])
+        return "new"
+
     def reset(self, n_beams: int) -> None:
         """Forget everything and start learning again for scans of ``n_beams`` beams."""
         if isinstance(n_beams, bool) or not isinstance(n_beams, int | np.integer) or n_beams < 1:
@@ -238,6 +307,8 @@ class BeamBackground:
                         "from scratch (%d scans)", self._n_beams, r.size, self.n_init)
             self.resets += 1
             self.reset(max(r.size, 1))
+            self.geometry = None
+            self._saved.clear()
             if r.size == 0:
                 return np.zeros(0, dtype=bool)
         if not self.initialised:
@@ -283,6 +354,26 @@ class BeamBackground:
         adopt = valid & np.isnan(bg)  # beam without a background yet (only with range_max_m = inf)
         bg[adopt] = r[adopt]
         return fg
+
+    max_geometries = 4
+
+
+def switch_geometry(background: BeamBackground, scan: Any, warned: set[tuple[str, Geometry]]) -> str:
+    """Point a scanner's background at the geometry of ``scan`` (a :class:`~fusiontrack.types.LaserScan`), as
+    :meth:`BeamBackground.set_geometry` does; a scan without beams changes nothing. Each geometry met after the
+    first is logged once per scanner (``warned`` holds what was logged); returns what happened."""
+    if scan.n_beams < 1:
+        return "same"
+    old = background.geometry
+    kind = background.set_geometry(scan.n_beams, scan.angle_min_rad, scan.angle_increment_rad)
+    key = (scan.sensor, background.geometry)
+    if kind in ("resampled", "new") and old is not None and key not in warned:
+        warned.add(key)
+        how = ("its background carried over from the nearest beams" if kind == "resampled"
+               else f"learning its background for it ({background.n_init} scans)")
+        log.warning("laser %s: scan geometry changed from %s to %s (beams, angle_min, increment); %s",
+                    scan.sensor, old, background.geometry, how)
+    return kind
 
 
 def all_initialised(states: Any) -> bool:

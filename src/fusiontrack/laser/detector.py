@@ -55,7 +55,13 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fusiontrack.errors import ConfigError
-from fusiontrack.laser.background import BeamBackground, InitMethod, all_initialised, keep_primed_backgrounds
+from fusiontrack.laser.background import (
+    BeamBackground,
+    InitMethod,
+    all_initialised,
+    keep_primed_backgrounds,
+    switch_geometry,
+)
 from fusiontrack.laser.clustering import Segments, cluster_scan, mean_shift_segments, segment_scan
 from fusiontrack.types import Detection, LaserScan
 
@@ -223,6 +229,7 @@ class LaserPeopleDetector:
         self.dropped_scans: dict[str, int] = dict.fromkeys(self._scanners, 0)
         """Scans dropped per scanner: out of order, or without usable beam angles."""
         self._warned: set[str] = set()
+        self._geometries_warned: set[tuple[str, tuple[int, float, float]]] = set()
 
     # ---------------------------------------------------------------------------------------------
     @property
@@ -314,15 +321,7 @@ class LaserPeopleDetector:
             r_max = scan.range_max_m if scan.range_max_m > r_min else math.inf
             st.background = BeamBackground(max(scan.n_beams, 1), **self._bg_args, range_min_m=r_min,
                                            range_max_m=r_max)
-        elif st.primed_ns is not None and scan.t_ns <= st.primed_ns and geometry != st.geometry:
-            st.t_ns = scan.t_ns  # a scan from before a geometry change the priming went through: no points
-            st.points_m = np.zeros((0, 2))
-            st.rigid = st.cluster = np.zeros(0, np.int64)
-            return
-        elif geometry != st.geometry:
-            log.warning("laser %s: scan geometry changed from %s to %s (beams, angle_min, increment); "
-                        "relearning its background", scan.sensor, st.geometry, geometry)
-            st.background.reset(max(scan.n_beams, 1))
+        switch_geometry(st.background, scan, self._geometries_warned)
         st.geometry = geometry
         last_ns, st.t_ns = st.t_ns, scan.t_ns
         r = scan.valid_ranges_m()

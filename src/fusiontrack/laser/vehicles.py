@@ -58,7 +58,13 @@ from typing import Any
 import numpy as np
 
 from fusiontrack.errors import ConfigError
-from fusiontrack.laser.background import BeamBackground, InitMethod, all_initialised, keep_primed_backgrounds
+from fusiontrack.laser.background import (
+    BeamBackground,
+    InitMethod,
+    all_initialised,
+    keep_primed_backgrounds,
+    switch_geometry,
+)
 from fusiontrack.laser.clustering import segment_scan
 from fusiontrack.laser.detector import planar_pose
 from fusiontrack.tracking import kalman
@@ -1014,6 +1020,7 @@ class LaserVehicleDetector:
         self.dropped_scans: dict[str, int] = dict.fromkeys(self._lasers, 0)
         """Scans dropped per scanner: out of time order, or without usable beam angles."""
         self._warned: set[str] = set()
+        self._geometries_warned: set[tuple[str, tuple[int, float, float]]] = set()
 
     # ---------------------------------------------------------------------------------------------
     @property
@@ -1096,18 +1103,14 @@ class LaserVehicleDetector:
         return True
 
     def _background_of(self, st: _Laser, scan: LaserScan) -> None:
-        """The laser's background, made at its first scan and relearnt when the scan geometry changes."""
+        """The laser's background, made at its first scan and switched with the scan geometry (kept per geometry)."""
         geometry = (scan.n_beams, scan.angle_min_rad, scan.angle_increment_rad)
         if st.background is None:
             r_min = scan.range_min_m if math.isfinite(scan.range_min_m) and scan.range_min_m > 0 else 0.0
             r_max = scan.range_max_m if scan.range_max_m > r_min else math.inf
             st.background = BeamBackground(max(scan.n_beams, 1), **self._bg_args, range_min_m=r_min,
                                            range_max_m=r_max)
-        elif geometry != st.geometry:
-            log.warning("laser %s: scan geometry changed from %s to %s (beams, angle_min, increment); "
-                        "relearning its background", scan.sensor, st.geometry, geometry)
-            st.background.reset(max(scan.n_beams, 1))
-            st.primed_ns = None
+        switch_geometry(st.background, scan, self._geometries_warned)
         st.geometry = geometry
 
     def __call__(self, scan: LaserScan) -> list[Detection]:
