@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import itertools
 import logging
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
 from fusiontrack.errors import ConfigError
-from fusiontrack.io.sync import Synchronizer, align_nearest, estimate_clock_offset, merge, synchronize
+from fusiontrack.io.sync import Synchronizer, align_nearest, estimate_clock_offset, merge, synchronize, with_time
 from fusiontrack.types import ImuSample, LaserScan
 
 
@@ -50,6 +53,51 @@ def test_out_of_order_within_window_is_restored_and_later_is_dropped(caplog):
     warnings = [r for r in caplog.records if r.levelno == logging.WARNING]
     assert len(warnings) == 1
     assert "laggard: 1" in warnings[0].getMessage()
+
+
+def _two_lasers(seconds: float, jitter_ns: int, rng: np.random.Generator) -> list[ImuSample]:
+    """Two 25 Hz sensors whose messages arrive with up to ``jitter_ns`` of disorder (as two scanners in a bag)."""
+    true_t = [(t, s) for t in range(0, round(seconds * 1e9), 40_000_000) for s in ("a", "b")]
+    arrival = np.array([t for t, _ in true_t]) + rng.integers(0, jitter_ns, len(true_t))
+    return [imu(true_t[i][0] + (1_000_000 if true_t[i][1] == "b" else 0), true_t[i][1])
+            for i in np.argsort(arrival, kind="stable")]
+
+
+@pytest.mark.parametrize("n_bad", [1, 2])
+def test_messages_stamped_far_ahead_are_dropped_not_followed(n_bad, caplog):
+    """One (or two) messages stamped an hour ahead (a corrupt stamp) used to move the stream's clock forward, so that
+    every later message counted as late: the reordering stopped and ~100 scans were dropped. Now only they are."""
+    stream = _two_lasers(4.0, 30_000_000, np.random.default_rng(1))
+    clean = sorted(r.t_ns for r in stream)
+    bad = [with_time(stream[k], stream[k].t_ns + 3_600_000_000_000) for k in (60, 61)[:n_bad]]
+    stream[60:60 + n_bad] = bad
+    sync = Synchronizer(window_ns=50_000_000)
+    with caplog.at_level(logging.WARNING):
+        out = list(sync(stream))
+    assert [r.t_ns for r in out] == sorted(set(clean) - {r.t_ns - 3_600_000_000_000 for r in bad})
+    assert sum(sync.dropped_ahead.values()) == n_bad
+    assert sum(sync.dropped.values()) == 0
+    assert "ahead of the others" in caplog.text
+
+
+def test_a_jump_of_the_whole_stream_is_followed():
+    """A recording paused for an hour: every sensor jumps at once, nothing is dropped, the order holds."""
+    rng = np.random.default_rng(2)
+    first, second = _two_lasers(2.0, 30_000_000, rng), _two_lasers(2.0, 30_000_000, rng)
+    stream = first + [with_time(r, r.t_ns + 3_600_000_000_000) for r in second]
+    sync = Synchronizer(window_ns=50_000_000)
+    out = list(sync(stream))
+    assert [r.t_ns for r in out] == sorted(r.t_ns for r in stream)
+    assert not sync.dropped
+    assert not sync.dropped_ahead
+
+
+def test_an_unconfirmed_leap_at_the_end_is_dropped():
+    stream = [imu(t) for t in range(0, 1_000_000_000, 10_000_000)] + [imu(7_200_000_000_000)]
+    sync = Synchronizer()
+    out = list(sync(stream))
+    assert len(out) == len(stream) - 1
+    assert sync.dropped_ahead == {"imu": 1}
 
 
 def test_clock_offsets_put_sensors_on_one_clock():
@@ -104,3 +152,29 @@ def test_align_nearest_marks_missing():
     idx = align_nearest(np.array([0, 100, 200]), np.array([5, 190]), 20)
     assert idx.tolist() == [0, -1, 1]
     assert align_nearest(np.array([1, 2]), np.array([], np.int64), 5).tolist() == [-1, -1]
+
+
+def test_the_pipeline_files_sync_window_reaches_track(tmp_path):
+    """``[sync] window_ms`` is how late a scan may come: scanner b's scans are logged 350 ms after a's of the same
+    time; with the default 200 ms they are dropped (warned), with ``window_ms = 500`` none is."""
+    from fusiontrack.io.writer import RecordingWriter
+
+    rng = np.random.default_rng(3)
+    with RecordingWriter(tmp_path / "rec") as w:
+        for i in range(60):
+            for name, lag_ns in (("a", 0), ("b", 350_000_000)):
+                r = (3.0 + 0.01 * rng.standard_normal(180)).astype(np.float32)
+                t = (i + 1) * 100_000_000
+                w.write(LaserScan(t, name, name, -1.5, 3.0 / 180, 0.05, 20.0, r), log_t_ns=t + lag_ns,
+                        topic=f"/{name}/scan")
+    (tmp_path / "wide.toml").write_text("[sync]\nwindow_ms = 500\n")
+
+    def track(*extra: str) -> str:
+        done = subprocess.run([sys.executable, "-m", "fusiontrack", "track", str(tmp_path / "rec"), "-o",
+                               str(tmp_path / "out"), "--no-video", *extra], capture_output=True, text=True,
+                              timeout=120, env={**os.environ, "COLUMNS": "300"})
+        assert done.returncode == 0, done.stderr
+        return done.stdout + done.stderr
+
+    assert "arrived more than 200 ms out of order" in track()
+    assert "out of order" not in track("-c", str(tmp_path / "wide.toml"))

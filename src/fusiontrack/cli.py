@@ -567,7 +567,7 @@ def track(
                 topics=topics, time_source=time_source, clock_corrections_ns=cfg.clock_corrections_ns(),
                 detector_params=cfg.laser or None, rng=seed, area_m=area_m, timings=timings,
                 adaptive_bias=camera_bias, progress=lambda f: bar.update(task, completed=f),
-                laser_poses=cfg.laser_poses())
+                laser_poses=cfg.laser_poses(), sync_window_ns=cfg.sync.window_ns)
             if not fstats.camera:
                 console.print("[yellow]no usable camera: people tracked with the lasers only[/yellow]")
             elif fstats.bias is not None:
@@ -586,7 +586,8 @@ def track(
                 recordings, tracker=tracker_kind, params=cfg.tracking or None, topics=topics,
                 time_source=time_source, clock_corrections_ns=cfg.clock_corrections_ns(),
                 detector_params=cfg.laser or None, rng=seed, area_m=area_m, timings=timings,
-                progress=lambda f: bar.update(task, completed=f), laser_poses=cfg.laser_poses())
+                progress=lambda f: bar.update(task, completed=f), laser_poses=cfg.laser_poses(),
+                sync_window_ns=cfg.sync.window_ns)
     output.mkdir(parents=True, exist_ok=True)
     write_tracks_csv(output / "tracks.csv", states)
     write_jsonl(output / "tracks.jsonl", [*states, *events])

@@ -1454,6 +1454,7 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
                 world_frame: str = "world", timings: dict[str, list[float]] | None = None,
                 classify: bool = True, frames_wrapper: Callable[[Any], FrameSource] | None = None,
                 background: str = "prime", laser_poses: Mapping[str, Any] | None = None,
+                sync_window_ns: int = 200_000_000,
                 ) -> tuple[list[TrackState], list[Event], FusionStats]:
     """Track the people of a recording with its laser scans and one camera (seed 001's fused pipeline).
 
@@ -1478,6 +1479,8 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         well. The result is :attr:`FusionStats.bias` and a ``camera_bias`` event.
     progress, topics, time_source, area_m, clock_corrections_ns, detector_params, rng, world_frame, classify
         As for ``track_recording``; ``clock_corrections_ns`` may also name the camera.
+    laser_poses, sync_window_ns
+        As for ``track_recording``.
     background : ``"prime"`` or ``"learn"``
         As for ``track_recording``: the laser backgrounds learnt first from the recording's first scans (default),
         or online only; the bias pass's own laser backgrounds likewise (:func:`learn_camera_bias`).
@@ -1552,7 +1555,7 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
                                                  laser_poses=laser_poses)
         laser_corrections = {k: v for k, v in corrections.items() if k != cam_sensor}
         if background == "prime":
-            detector.prime(synchronize(rec.messages(lasers, time_source=time_source),
+            detector.prime(synchronize(rec.messages(lasers, time_source=time_source), sync_window_ns,
                                        clock_corrections_ns=laser_corrections))
         bias = None
         if camera is not None and learning is not None and first_path is not None:
@@ -1574,7 +1577,8 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         trk = FusionTracker(camera, frames, p, tracker_params, area_m=None if auto_area else area_m, rng=rng,
                             camera_name=cam_sensor or "camera")
         trk.stats.camera, trk.stats.bias = cam_sensor, bias
-        stream = synchronize(rec.messages(lasers, time_source=time_source), clock_corrections_ns=laser_corrections)
+        stream = synchronize(rec.messages(lasers, time_source=time_source), sync_window_ns,
+                             clock_corrections_ns=laser_corrections)
         states, events = run_tracker(trk, detector, poses, stream, total=total, auto_area=auto_area,
                                      classify=classify, progress=progress, timings=timings)
     if bias is not None and len(bias.history):

@@ -4,7 +4,10 @@
 * :class:`Synchronizer` puts a stream on a common clock (a per-sensor offset added to ``t_ns``) and
   back into time order: a message that arrives late by at most ``window_ns`` is put back in its
   place; one later than that is dropped and counted, and one warning with the counts is logged
-  when the stream ends (never one per message).
+  when the stream ends (never one per message). A message stamped far *ahead* of the stream (a
+  corrupt stamp, a clock that jumped) is held until the next messages show whether the whole
+  stream jumped (a recording paused) or only it did (dropped, counted): one bad stamp must not
+  push the clock forward and make every later message "late".
 * :func:`estimate_clock_offset` and :func:`align_nearest` are seed 001's client/server clock
   correction and frame alignment (ALGORITHMS.md B1).
 """
@@ -54,19 +57,40 @@ class Synchronizer:
         whose clock runs ``d`` ahead needs ``-d`` (the pipeline file's ``clock_offset_ms`` is ``d``;
         :func:`estimate_clock_offset` returns the correction itself).
 
-    Iterate :meth:`__call__` over a stream; :attr:`dropped` and :attr:`reordered` count what happened.
+    leap_ns : int
+        A message stamped more than ``max(leap_ns, window_ns)`` after the newest one so far is a *leap*.
+        It is held back; if the next ``leap_confirm - 1`` messages leap as well, the stream has jumped (a
+        paused recording, a restarted clock) and they are all let through; if a message at the old clock
+        comes first, the held ones were bad stamps and are dropped (counted in :attr:`dropped_ahead`).
+        Default 1 s.
+    leap_confirm : int
+        Messages in a row that confirm a leap (default 3: a single bad stamp, or two, are dropped). A leap at
+        the end of the stream that nothing confirms is dropped.
+
+    Iterate :meth:`__call__` over a stream; :attr:`dropped`, :attr:`dropped_ahead` and :attr:`reordered` count
+    what happened.
     """
 
-    def __init__(self, window_ns: int = 200_000_000, clock_corrections_ns: Mapping[str, int] | None = None) -> None:
+    def __init__(self, window_ns: int = 200_000_000, clock_corrections_ns: Mapping[str, int] | None = None, *,
+                 leap_ns: int = 1_000_000_000, leap_confirm: int = 3) -> None:
         if isinstance(window_ns, bool) or not isinstance(window_ns, int | np.integer) or window_ns < 0:
             raise ConfigError(f"sync window_ns: expected a non-negative integer of nanoseconds, got {window_ns!r}")
+        if isinstance(leap_ns, bool) or not isinstance(leap_ns, int | np.integer) or leap_ns <= 0:
+            raise ConfigError(f"sync leap_ns: expected a positive integer of nanoseconds, got {leap_ns!r}")
+        if isinstance(leap_confirm, bool) or not isinstance(leap_confirm, int | np.integer) or leap_confirm < 1:
+            raise ConfigError(f"sync leap_confirm: expected an integer >= 1, got {leap_confirm!r}")
         offsets = dict(clock_corrections_ns or {})
         for sensor, value in offsets.items():
             if isinstance(value, bool) or not isinstance(value, int | np.integer):
                 raise ConfigError(f"clock offset of sensor {sensor!r}: expected integer nanoseconds, got {value!r}")
         self.window_ns = int(window_ns)
         self.clock_corrections_ns = {k: int(v) for k, v in offsets.items()}
+        self.leap_ns = max(int(leap_ns), self.window_ns)
+        self.leap_confirm = int(leap_confirm)
         self.dropped: Counter[str] = Counter()
+        """Messages dropped because they came later than ``window_ns``, per sensor."""
+        self.dropped_ahead: Counter[str] = Counter()
+        """Messages dropped because they were stamped far ahead of the stream and nothing followed them, per sensor."""
         self.reordered = 0
 
     def __call__(self, stream: Iterable[Any]) -> Iterator[Any]:
@@ -74,21 +98,37 @@ class Synchronizer:
         counter = itertools.count()
         newest = None  # newest corrected time seen so far
         last_out = None  # time of the last message let out
+        leaps: list[tuple[int, Any]] = []  # messages far ahead of ``newest``, held until confirmed or refuted
         for record in stream:
             offset = self.clock_corrections_ns.get(record.sensor, 0)
             t = record.t_ns + offset
             if offset:
                 record = with_time(record, t)
-            if last_out is not None and t < last_out:
-                self.dropped[record.sensor] += 1
-                continue
-            if newest is not None and t < newest:
-                self.reordered += 1
-            newest = t if newest is None else max(newest, t)
-            heapq.heappush(heap, (t, next(counter), record))
-            while heap and heap[0][0] <= newest - self.window_ns:
-                last_out, _, out = heapq.heappop(heap)
-                yield out
+            if newest is not None and t > newest + self.leap_ns:
+                leaps.append((t, record))
+                if len(leaps) < self.leap_confirm:
+                    continue
+                accepted, leaps = leaps, []  # the stream jumped: let them all through
+            elif leaps:
+                for _, bad in leaps:  # a message at the old clock: the held ones were bad stamps
+                    self.dropped_ahead[bad.sensor] += 1
+                leaps = []
+                accepted = [(t, record)]
+            else:
+                accepted = [(t, record)]
+            for t, record in accepted:
+                if last_out is not None and t < last_out:
+                    self.dropped[record.sensor] += 1
+                    continue
+                if newest is not None and t < newest:
+                    self.reordered += 1
+                newest = t if newest is None else max(newest, t)
+                heapq.heappush(heap, (t, next(counter), record))
+                while heap and heap[0][0] <= newest - self.window_ns:
+                    last_out, _, out = heapq.heappop(heap)
+                    yield out
+        for _, bad in leaps:
+            self.dropped_ahead[bad.sensor] += 1
         while heap:
             last_out, _, out = heapq.heappop(heap)
             yield out
@@ -97,6 +137,13 @@ class Synchronizer:
                 "dropped %d message(s) that arrived more than %.0f ms out of order: %s",
                 sum(self.dropped.values()), self.window_ns / 1e6,
                 ", ".join(f"{s}: {n}" for s, n in sorted(self.dropped.items())),
+            )
+        if self.dropped_ahead:
+            log.warning(
+                "dropped %d message(s) stamped more than %.0f ms ahead of the others (bad stamps, or a clock "
+                "offset to set in the pipeline file): %s",
+                sum(self.dropped_ahead.values()), self.leap_ns / 1e6,
+                ", ".join(f"{s}: {n}" for s, n in sorted(self.dropped_ahead.items())),
             )
 
 

@@ -1957,7 +1957,8 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
                     detector_params: Mapping[str, Any] | None = None, rng: np.random.Generator | int | None = 0,
                     world_frame: str = "world", timings: dict[str, list[float]] | None = None,
                     background: str = "prime", classify: bool = True,
-                    laser_poses: Mapping[str, Any] | None = None) -> tuple[list[TrackState], list[Event]]:
+                    laser_poses: Mapping[str, Any] | None = None,
+                    sync_window_ns: int = 200_000_000) -> tuple[list[TrackState], list[Event]]:
     """Detect and track the people in a recording's laser scans.
 
     Builds a :class:`~fusiontrack.laser.LaserPeopleDetector` from the laser topics (each scanner posed by
@@ -2002,6 +2003,9 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
     laser_poses : mapping of topic -> laser2world, optional
         Scanner poses (``(3, 3)`` 2-D or ``(4, 4)``) that override ``/tf_static``: a pipeline file's
         ``[sensors.<name>] pose`` (:meth:`fusiontrack.config.PipelineConfig.laser_poses`).
+    sync_window_ns : int
+        How late a scan may arrive and still be put back in time order (the pipeline file's ``[sync] window_ms``;
+        :class:`~fusiontrack.io.sync.Synchronizer`).
 
     Returns
     -------
@@ -2033,11 +2037,11 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
                                                  background="none" if background == "none" else "learn",
                                                  detector_params=detector_params, laser_poses=laser_poses)
         if background == "prime":
-            detector.prime(synchronize(rec.messages(lasers, time_source=time_source),
+            detector.prime(synchronize(rec.messages(lasers, time_source=time_source), sync_window_ns,
                                        clock_corrections_ns=clock_corrections_ns))
         trk = make_tracker(tracker, params, area_m, rng)
         auto_area = isinstance(area_m, str)
-        stream = synchronize(rec.messages(lasers, time_source=time_source),
+        stream = synchronize(rec.messages(lasers, time_source=time_source), sync_window_ns,
                              clock_corrections_ns=clock_corrections_ns)
         states, events = run_tracker(trk, detector, poses, stream, total=total, auto_area=auto_area,
                                      classify=classify, progress=progress, timings=timings)
