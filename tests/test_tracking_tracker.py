@@ -737,3 +737,47 @@ def test_merged_pair_seen_apart_splits_when_a_neighbours_gate_holds_one_piece() 
         for tid, w in ((1, 0), (2, 1), (3, 2)):
             assert np.hypot(*(by_id[tid].position_m - walks[w][0][k])) < 0.25, (k, tid)
             assert by_id[tid].situation != Situation.MERGED
+
+
+@pytest.mark.parametrize("split_birth_m", [1.5, 0.0])
+def test_a_member_who_walks_off_unseen_is_split_off_not_born_again(split_birth_m: float) -> None:
+    """Two walkers side by side (0.5 m) are one segment for 0.8 s and merge; then B veers 60 degrees away while
+    hidden for 0.6 s and walks on beside A, seen again 1.2 m from A, out of the merged target's gate. Without the
+    rule (0) B is born again under a new id and the merged target keeps a phantom member on A; with it, B's
+    candidate confirmed beside the merged target splits it: both identities go on, each on its own walker."""
+    rng = np.random.default_rng(8)
+    trk = LaserPeopleTracker({"split_birth_m": split_birth_m}, area_m=(0.0, 0.0, 14.0, 10.0), rng=0)
+    n = 5 * 25
+    a_pos, a_feet = _walk(n, np.array([2.0, 4.0]), np.zeros(n), 1.2, 1.3)
+    b_heading = np.where((np.arange(n) >= 60) & (np.arange(n) < 75), np.pi / 3, 0.0)  # 60 degrees away, hidden
+    b_pos, b_feet = _walk(n, np.array([2.0, 4.5]), b_heading, 1.2, 1.3, phase0=1.0)
+    ids, last, events = set(), [], []
+    for k in range(n):
+        t_ns = k * FRAME_NS
+        if 40 <= k < 60:  # one segment at their middle
+            feet = np.concatenate([a_feet[k], b_feet[k]])
+            dets = [Detection(t_ns, "laser", position_m=0.5 * (a_pos[k] + b_pos[k]), features={
+                "feet_m": 0.5 * (a_feet[k] + b_feet[k]), "inter_feet_m": np.asarray(0.2),
+                "one_foot": np.asarray(False), "points_m": _leg_points(feet, rng)})]
+        elif 60 <= k < 75:  # B hidden
+            dets = [_detection(t_ns, a_feet[k], rng)]
+        else:
+            dets = [_detection(t_ns, a_feet[k], rng), _detection(t_ns, b_feet[k], rng)]
+        states = trk.step(t_ns, dets)
+        ids |= {s.track_id for s in states}
+        events += trk.events
+        if k >= n - 10:
+            last.append((k, states))
+    assert np.hypot(*(b_pos[75] - a_pos[75])) > 1.0  # B came back out of reach of the merged target
+    events += trk.finish()
+    assert any(e.kind == "merge" for e in events)
+    if split_birth_m == 0:
+        assert ids == {1, 2, 3}  # B born again
+        return
+    assert ids == {1, 2}
+    assert any(e.kind == "split" and set(e.track_ids) == {1, 2} for e in events)
+    for k, states in last:
+        pos = sorted((s.position_m for s in states), key=lambda p: p[1])
+        assert len(pos) == 2
+        assert np.hypot(*(pos[0] - a_pos[k])) < 0.3
+        assert np.hypot(*(pos[1] - b_pos[k])) < 0.3

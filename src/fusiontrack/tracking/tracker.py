@@ -251,6 +251,10 @@ class TrackerParams:
     split_min_m : float
         ... and the two farthest of its detections must be at least this far apart (the simulator's truth
         calls people closer than 0.6 m merged) [RECON].
+    split_birth_m : float
+        A new track confirmed within this distance of a merged target's detection, and first seen within it of
+        where the merged target was then, is a member leaving it: the merged target splits instead (0: never)
+        [RECON].
     candidate_gate_m, candidate_gap_s : float
         A candidate takes the nearest unclaimed detection within this distance, and is dropped after this
         long without one [RECON].
@@ -381,6 +385,7 @@ class TrackerParams:
     member_alpha: float = 0.2
     member_min_gap_m: float = 0.35
     split_min_m: float = 0.6
+    split_birth_m: float = 1.5
     blob_radius_m: float = 0.15
     single_s: float = 2.0
     multi_fraction: float | None = None
@@ -418,7 +423,7 @@ class TrackerParams:
                         "merged_q", "correlated_gap_s", "appear_window_s", "member_beta", "member_min_gap_m",
                         "split_min_m", "blob_radius_m", "single_s", "reacquire_speed_mps", "min_correlated_s",
                         "split_hold_s", "reacquire_max_m", "edge_min_age_s", "edge_leave_s", "appear_latency_s",
-                        "glimpse_s", "glimpse_speed_mps")
+                        "glimpse_s", "glimpse_speed_mps", "split_birth_m")
         for name in non_negative:
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
@@ -1348,6 +1353,15 @@ class LaserPeopleTracker:
         new_merged: list[_Merged] = []
         new_walkers: list[dict[str, Any]] = []
 
+        # ---- candidates followed; one ready to be born beside a merged target may be a member leaving it
+        free = (~claimed).nonzero()[0]
+        ready = used = _NO_INDEX
+        births_due = bool(free.size or len(self._cand))
+        if births_due:
+            ready = self._ready_births(t_ns, det, free, edge_d)
+            if ready.size and n_m and p.split_birth_m > 0:
+                used = self._births_that_split(t_ns, det, free, ready, labels, assigned, dead_m, split_now)
+
         # ---- merges (B7 rule 1, B17): targets sharing one detection become one merged target
         groups = merge_groups if n_t else {}
         if groups:
@@ -1446,9 +1460,8 @@ class LaserPeopleTracker:
                                       sensors))
 
         # ---- births (B7 rule 6): candidates from unclaimed detections
-        free = (~claimed).nonzero()[0]
-        if free.size or len(self._cand):
-            states.extend(self._births(t_ns, det, free, edge_d))
+        if births_due:
+            states.extend(self._births(t_ns, det, free, ready, used))
 
         # ---- correlated runs that ended, splits that were not undone
         if self._corr:
@@ -1634,7 +1647,8 @@ class LaserPeopleTracker:
         self._held_splits[frozenset(ids)] = Event(t_ns, p.sensor, "split", t_ns, position_m=m.x[0:2].copy(),
                                                   track_ids=ids, attributes={"parts": tuple(sorted(parts)), **how})
 
-    def _births(self, t_ns: int, det: DetectionArrays, free: np.ndarray, edge_d: np.ndarray) -> list[TrackState]:
+    def _ready_births(self, t_ns: int, det: DetectionArrays, free: np.ndarray, edge_d: np.ndarray) -> np.ndarray:
+        """Follow the candidates with the unclaimed detections ``free``; the candidates confirmed now."""
         p = self.params
         cd = self._cand
         blobs = None
@@ -1642,9 +1656,56 @@ class LaserPeopleTracker:
             blobs = np.array([0 if det.points[j] is None else count_blobs(det.points[j], p.blob_radius_m)
                               for j in free], np.int64)
         cd.update(t_ns, det.centres[free], edge_d[free], blobs)
-        ready = cd.ready(t_ns, self._frames_ns(p.n_confirm - 1), self._frames_ns(p.n_confirm_interior - 1))
+        return cd.ready(t_ns, self._frames_ns(p.n_confirm - 1), self._frames_ns(p.n_confirm_interior - 1))
+
+    def _births_that_split(self, t_ns: int, det: DetectionArrays, free: np.ndarray, ready: np.ndarray,
+                           labels: np.ndarray, assigned: np.ndarray, dead_m: np.ndarray,
+                           split_now: dict[int, np.ndarray]) -> np.ndarray:
+        """Confirmed candidates that are a member leaving a merged target [RECON]; each such target is put in
+        ``split_now`` with its own detection and the candidate's. Returns the candidates used so.
+
+        A merged target of two people who came in side by side kept both members on one person once the other
+        walked off: the one who left was out of its gate by the time the scanners saw them apart, was born again
+        under a new id, and the merged target held a phantom member for seconds (its leg blobs flicker to three
+        on one person, so the one-person rule did not end it). A candidate confirmed within ``split_birth_m`` of
+        a merged target's detection (at least ``split_min_m`` from it), and first seen within ``split_birth_m``
+        of where the merged target was then, is taken as that: the merged target splits onto the two
+        detections, identities by motion (or by appearance, with the fusion hook), as B7 rule 2's splits do."""
+        p = self.params
+        cd = self._cand
+        n_w = self._id.size
+        hosts = [i for i, m in enumerate(self._merged) if len(m.info) >= 2 and labels[n_w + i] == _MERGED
+                 and not dead_m[i] and i not in split_now and assigned[n_w + i] >= 0 and m.seen == t_ns]
+        used = []
+        for k in ready.tolist():
+            if not hosts:
+                break
+            j = int(free[cd.det[k]])
+            back_s = (t_ns - int(cd.first_t[k])) / 1e9
+            best, best_d = -1, math.inf
+            for i in hosts:
+                m = self._merged[i]
+                a = int(assigned[n_w + i])
+                d_now = float(np.hypot(*(det.centres[j] - det.centres[a])))
+                d_then = float(np.hypot(*(cd.first_pos[k] - (m.x[0:2] - m.x[2:4] * back_s))))
+                if p.split_min_m <= d_now <= p.split_birth_m and d_then <= p.split_birth_m and d_now < best_d:
+                    best, best_d = i, d_now
+            if best >= 0:
+                split_now[best] = np.array([int(assigned[n_w + best]), j], np.int64)
+                hosts.remove(best)
+                used.append(k)
+        return np.array(used, np.int64)
+
+    def _births(self, t_ns: int, det: DetectionArrays, free: np.ndarray, ready: np.ndarray, used: np.ndarray
+                ) -> list[TrackState]:
+        """New tracks from the candidates ``ready`` (but those ``used`` by a split), which then leave the set."""
+        p = self.params
+        cd = self._cand
         states = []
+        skip = set(used.tolist())
         for k in ready:
+            if k in skip:
+                continue
             j = int(free[cd.det[k]])
             span = max((t_ns - int(cd.first_t[k])) / 1e9, 1e-3)
             v0 = (cd.pos[k] - cd.first_pos[k]) / span
