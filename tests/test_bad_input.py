@@ -166,6 +166,7 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         (["eval", "{tracks}", "{demo}", "-o", "{a_dir}"], "is a folder"),
         (["fit-step-model", "walk.csv", "-l", "10", "-o", "{a_dir}"], "is a folder"),
         # eval's own options
+        (["eval", "{binary}", "{demo}"], "binary.png: not a UTF-8 text file (expected JSON lines"),
         (["eval", "{tracks}", "{demo}", "--time", "lgo"], "--time: expected 'header' or 'log', got 'lgo'"),
         (["eval", "{tracks}", "{demo}", "--topic", "/gt_wrong"], "/gt_wrong"),
         (["eval", "{mot}", "{a_dir}"], "a_dir: a folder that is not a recording"),
@@ -198,6 +199,7 @@ def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args
     for name, text in tables.items():
         (tmp_path / f"{name}.toml").write_text(text)
     (tmp_path / "a_file").write_text("")
+    (tmp_path / "binary.png").write_bytes(bytes(range(128, 256)) * 8)
     (tmp_path / "a_dir").mkdir()
     (tmp_path / "hall.toml").write_text('[sensors.camera_0]\nkind = "camera"\ntopic = "/camera_0/image"\n'
                                         'pose = { x = 0.0, y = 0.0, z = 3.0, yaw_deg = 0.0 }\n')
@@ -209,7 +211,7 @@ def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args
              "legs": str(shared_data / "laser/leg_tracker_demo/training/positive_1_extracted.bag"),
              "a_file": str(tmp_path / "a_file"), "a_dir": str(tmp_path / "a_dir"), "tracks": str(tracks),
              "hall": str(tmp_path / "hall.toml"), "two_points": str(tmp_path / "two_points.csv"),
-             "mot": str(tmp_path / "det.txt"),
+             "mot": str(tmp_path / "det.txt"), "binary": str(tmp_path / "binary.png"),
              **{name: str(tmp_path / f"{name}.toml") for name in tables}}
     result = _cli(*[a.format(**subst) for a in args])
     assert result.returncode == 2
