@@ -796,12 +796,19 @@ def _track_camera(sources: list[Path], output: Path, *, detections: Path | None,
         console.print(f"overlay: {overlay} ({stats.n_frames} frames)")
 
 
+def _tracks_file(path: Path) -> Path:
+    """The tracks file ``path`` names: itself, or in a folder of `fusiontrack track` its tracks.jsonl (else
+    tracks.csv)."""
+    if path.is_dir():
+        return path / "tracks.jsonl" if (path / "tracks.jsonl").exists() else path / "tracks.csv"
+    return path
+
+
 def _read_tracks(path: Path) -> tuple[list[Any], list[Any]]:
     from .io.tracks import read_jsonl, read_tracks_csv
     from .types import Event, TrackState
 
-    if path.is_dir():
-        path = path / "tracks.jsonl" if (path / "tracks.jsonl").exists() else path / "tracks.csv"
+    path = _tracks_file(path)
     if path.suffix == ".csv":
         return read_tracks_csv(path), []
     records = read_jsonl(path)
@@ -923,6 +930,8 @@ def eval_(
         result["metrics"] = metrics.to_dict()
     else:
         states, events = _read_tracks(tracks)
+        if not states:  # a run that tracked nobody scores, but not silently
+            log.warning("no track states in %s: every ground-truth position counts as missed", _tracks_file(tracks))
         frames, gt_topic = _read_truth(ground_truth, topic, time_source)
         scored, label = frames, f"{tracks.name} vs {gt_topic}"
         if at is not None:
@@ -1006,6 +1015,8 @@ def _eval_image_boxes(tracks: Path, recording: Path, camera: str | None, time_so
     states = ([r for r in read_jsonl(source) if isinstance(r, TrackState) and r.box_px is not None]
               if source.suffix == ".jsonl" else None)
     auto = camera is None
+    if states is not None and not states and camera is not None:
+        log.warning("no track states with image boxes in %s: every truth box counts as missed", source)
     if camera is None and states is None:  # MOT rows: their camera is that of the tracks.jsonl beside them
         sibling = source.parent / "tracks.jsonl"
         cams = cameras_of([r for r in read_jsonl(sibling) if isinstance(r, TrackState) and r.box_px is not None]) \
