@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -275,6 +276,43 @@ def test_a_recording_without_lasers_points_to_the_camera_pipeline(shared_data):
     assert message.startswith(f"{bag}:")
     assert "/hero/head_rgbd_sensor/rgb/image_raw" in message
     assert "--pipeline people-camera" in message
+
+
+def test_an_output_that_cannot_be_written_is_one_line_naming_it(tmp_path):
+    """The OS refusing an output (a file where a folder is needed, a full disk: /dev/full, a read-only folder when
+    not root) ends as one line naming the path and the OS's reason, exit code 2, whichever command writes it."""
+    from fusiontrack.io.tracks import write_tracks_csv
+    from fusiontrack.types import TrackState
+
+    write_tracks_csv(tmp_path / "tracks.csv", [TrackState(10**9, "laser", 1, np.zeros(2), np.zeros(2))])
+    (tmp_path / "gt.csv").write_text("t,id,x,y\n1.0,1,0.0,0.0\n")
+    (tmp_path / "a_file").write_text("")
+    def eval_to(name: str) -> list[str]:
+        return ["eval", str(tmp_path / "tracks.csv"), str(tmp_path / "gt.csv"), "-o", str(tmp_path / name)]
+
+    cases = [(eval_to("a_file/m.json"), f"{tmp_path / 'a_file'}: [Errno 17] File exists and is not a folder")]
+    if Path("/dev/full").exists():  # writes to it fail: no space left on device
+        (tmp_path / "full.json").symlink_to("/dev/full")
+        cases.append((eval_to("full.json"),
+                      f"cannot write {tmp_path / 'full.json'}: [Errno 28] No space left on device"))
+        with RecordingWriter(tmp_path / "rec") as w:
+            for i in range(20):
+                w.write(LaserScan((i + 1) * 100_000_000, "laser", "laser", -1.0, 0.02, 0.02, 5.0,
+                                  np.full(100, 3.0, np.float32)))
+        (tmp_path / "out").mkdir()
+        (tmp_path / "out" / "tracks.csv").symlink_to("/dev/full")
+        cases.append((["track", str(tmp_path / "rec"), "-o", str(tmp_path / "out"), "--no-video"],
+                      f"cannot write {tmp_path / 'out' / 'tracks.csv'}: [Errno 28] No space left on device"))
+    if os.geteuid() != 0:  # root writes into a read-only folder anyway
+        (tmp_path / "ro").mkdir(mode=0o500)
+        cases.append((eval_to("ro/m.json"), f"{tmp_path / 'ro' / 'm.json'}: [Errno 13]"))
+    for args, expected in cases:
+        result = _cli(*args)
+        assert result.returncode == 2, result.stderr
+        lines = [ln for ln in result.stderr.splitlines() if ln.strip()]
+        assert len(lines) == 1, result.stderr
+        assert lines[0].startswith("error: ")
+        assert expected in lines[0]
 
 
 def test_a_failed_camera_run_leaves_no_empty_folder(tmp_path):

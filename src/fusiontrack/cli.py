@@ -1350,14 +1350,56 @@ def demo(
                   f"({real_video.frames} frames); summary: {output / 'summary.json'}")
 
 
+def _open_file_of(err: BaseException) -> Any:
+    """The file the failing code had open for writing when ``err`` was raised (its innermost such local), or None:
+    a write that fails on a full disk raises an OSError without a file name."""
+    import io
+
+    frames = []
+    tb = err.__traceback__
+    while tb is not None:
+        frames.append(tb.tb_frame)
+        tb = tb.tb_next
+    for frame in reversed(frames):
+        for value in frame.f_locals.values():
+            if isinstance(value, io.IOBase) and isinstance(getattr(value, "name", None), str) \
+                    and set(getattr(value, "mode", "")) & set("wax+"):
+                return value
+    return None
+
+
+def os_error_line(err: OSError) -> str:
+    """One line for an OSError that reached the command line (writing the outputs: a read-only, full or missing
+    folder; the readers name their own files): the path, when the error or the failing code's open file gives it,
+    and the OS's reason, e.g. ``cannot write out/x/tracks.csv: [Errno 28] No space left on device``."""
+    import errno
+
+    reason = f"[Errno {err.errno}] {err.strerror}" if err.errno is not None and err.strerror else str(err)
+    if err.filename is not None:
+        path = os.fsdecode(err.filename)
+        if err.errno == errno.EEXIST and not Path(path).is_dir():  # mkdir(exist_ok=True) on a file
+            reason += " and is not a folder"
+        if err.filename2 is not None:
+            path += f" -> {os.fsdecode(err.filename2)}"
+        return f"{path}: {reason}"
+    file = _open_file_of(err)
+    return f"cannot write {file.name}: {reason}" if file is not None else reason
+
+
 def main() -> None:
-    """Entry point: run the app, turning fusiontrack's errors into one clear line and exit code 2."""
+    """Entry point: run the app, turning fusiontrack's errors (and the OS's, writing the outputs) into one clear
+    line and exit code 2."""
     try:
         app()
     except FusiontrackError as err:
         if os.environ.get("FUSIONTRACK_DEBUG"):
             raise
         err_console.print(f"[bold red]error:[/] {escape(str(err))}", highlight=False, soft_wrap=True)
+        sys.exit(2)
+    except OSError as err:
+        if os.environ.get("FUSIONTRACK_DEBUG"):
+            raise
+        err_console.print(f"[bold red]error:[/] {escape(os_error_line(err))}", highlight=False, soft_wrap=True)
         sys.exit(2)
     except KeyboardInterrupt:
         err_console.print("interrupted")
