@@ -183,6 +183,15 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
           "--dry-run"], "two_points.csv: 2 control points given, at least 4 are needed"),
         (["calibrate", "camera_0", "-c", "{hall}", "--points", "{two_points}", "--dry-run"],
          "camera_0: its intrinsics are needed: give --intrinsics"),
+        # intrinsics and a learning rate that cannot be used: the option, before any reading
+        (["calibrate", "camera_0", "-c", "{hall}", "--points", "{two_points}", "--intrinsics=-500,500,320,240",
+          "--dry-run"], "--intrinsics: expected focal lengths fx, fy > 0 (pixels), got fx=-500, fy=500"),
+        (["calibrate", "camera_0", "-c", "{hall}", "--points", "{two_points}", "--intrinsics", "500,nan,320,240",
+          "--dry-run"], "--intrinsics: expected finite numbers, got '500,nan,320,240'"),
+        (["calibrate", "camera_0", "-c", "{hall}", "--adaptive", "{demo}", "--rho", "-1", "--dry-run"],
+         "--rho: expected a learning rate in (0, 1], got -1.0"),
+        (["calibrate", "camera_0", "-c", "{hall}", "--adaptive", "{demo}", "--rho", "nan", "--dry-run"],
+         "--rho: expected a learning rate in (0, 1], got nan"),
     ],
 )
 def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args, expected):

@@ -1065,6 +1065,27 @@ def _bounds_of(recording: Path) -> Any:
 # --------------------------------------------------------------------------------------------------
 
 
+def _parse_intrinsics(text: str) -> tuple[Any, Any]:
+    """``--intrinsics fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]`` as (K, distortion or None); a ConfigError naming the option
+    for anything but finite numbers with focal lengths fx, fy > 0."""
+    import math
+
+    import numpy as np
+
+    try:
+        vals = [float(v) for v in text.split(",")]
+    except ValueError as err:
+        raise ConfigError(f"--intrinsics: expected numbers fx,fy,cx,cy[,...], got {text!r}") from err
+    if len(vals) not in (4, 8, 9):
+        raise ConfigError(f"--intrinsics: expected 4, 8 or 9 numbers, got {len(vals)}")
+    if not all(math.isfinite(v) for v in vals):
+        raise ConfigError(f"--intrinsics: expected finite numbers, got {text!r}")
+    fx, fy, cx, cy = vals[:4]
+    if fx <= 0 or fy <= 0:
+        raise ConfigError(f"--intrinsics: expected focal lengths fx, fy > 0 (pixels), got fx={fx:g}, fy={fy:g}")
+    return np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), np.array(vals[4:]) if len(vals) > 4 else None
+
+
 @app.command()
 def calibrate(
     camera: Annotated[str, typer.Argument(help="The camera's sensor name in the pipeline file.")],
@@ -1093,17 +1114,10 @@ def calibrate(
 
     if (points is None) == (adaptive is None):
         raise ConfigError("calibrate: give exactly one of --points CSV or --adaptive RECORDING")
+    if not 0.0 < rho <= 1.0:  # (NaN too)
+        raise ConfigError(f"--rho: expected a learning rate in (0, 1], got {rho}")
     if points is not None:
-        intr: Any = None
-        if intrinsics is not None:
-            try:
-                vals = [float(v) for v in intrinsics.split(",")]
-            except ValueError as err:
-                raise ConfigError(f"--intrinsics: expected numbers fx,fy,cx,cy[,...], got {intrinsics!r}") from err
-            if len(vals) not in (4, 8, 9):
-                raise ConfigError(f"--intrinsics: expected 4, 8 or 9 numbers, got {len(vals)}")
-            fx, fy, cx, cy = vals[:4]
-            intr = (np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), np.array(vals[4:]) if len(vals) > 4 else None)
+        intr = _parse_intrinsics(intrinsics) if intrinsics is not None else None
         from .errors import CalibrationError
 
         try:
