@@ -1195,7 +1195,10 @@ def calibrate_road_command(
 @app.command(name="train-classifier")
 def train_classifier(
     output: Annotated[Path | None, typer.Option("--output", "-o", help="Where to write the model (JSON); default: "
-                                                "the one shipped in the package, which the tracker uses.")] = None,
+                                                "object_classifier.json in the working directory.")] = None,
+    into_package: Annotated[bool, typer.Option("--into-package", help="Instead of --output, replace the model "
+                                               "shipped in the package (laser/models/object_classifier.json), the "
+                                               "one the tracker uses.")] = False,
     work: Annotated[Path, typer.Option(help="Folder for the simulated training recordings (reused if there).")]
     = Path("out/classifier"),
     data: Annotated[Path, typer.Option(help="The shared data folder (leg_tracker's training bags).")]
@@ -1204,17 +1207,22 @@ def train_classifier(
     road_seconds: Annotated[float, typer.Option(help="Length of each simulated road run.")] = 90.0,
     rounds: Annotated[int, typer.Option(help="Boosting rounds (B18: 100).")] = 100,
 ) -> None:
-    """Rebuild the person / bicycle / car classifier of laser segments (B18) from simulated and real data."""
-    from .laser.classifier import default_model_path, train_default
+    """Train the person / bicycle / car classifier of laser segments (B18) from simulated and real data.
+
+    The tracker classifies with the model shipped in the package; no pipeline-file key loads another. A model
+    written to --output is for comparing, or for Python: TrackClassifier(ObjectClassifier.load(FILE)).
+    --into-package rebuilds the shipped one (in a source checkout: the file in the repository).
+    """
+    from .laser.classifier import MODEL_FILE, default_model_path, train_default
 
     if rounds < 1:
         raise ConfigError(f"--rounds: expected >= 1, got {rounds}")
-    if output is not None:
-        _out_file(output, "object_classifier.json")
+    if into_package and output is not None:
+        raise ConfigError(f"--into-package writes {default_model_path()}: give it or --output, not both")
+    target = default_model_path() if into_package else _out_file(output or Path(MODEL_FILE), MODEL_FILE)
     with console.status("training") as status:
         model, report = train_default(work, crowd_seconds=crowd_seconds, road_seconds=road_seconds, data_dir=data,
                                       n_rounds=rounds, progress=lambda msg: status.update(msg))
-    target = output if output is not None else default_model_path()
     model.save(target)
     table = Table(show_edge=False, header_style="bold", title="held-out test (simulator seed 2; real: last 30 %)")
     for col in ("source / class", "train", "test", "accuracy / recall"):
