@@ -37,6 +37,22 @@ def test_a_file_that_is_not_a_bag(tmp_path):
         Recording(other)
 
 
+def test_a_recording_given_twice_is_refused(tmp_path):
+    """The same recording twice (by the same path, another spelling of it, or a rosbag2 folder and its .mcap) would
+    be merged with itself; two different recordings still merge."""
+    scans = [LaserScan(i * 100_000_000, "laser", "laser", -1.0, 0.01, 0.02, 5.0, np.ones(21)) for i in range(1, 4)]
+    write_recording(tmp_path / "rec", scans)
+    write_recording(tmp_path / "other", scans)
+    (mcap,) = (tmp_path / "rec").glob("*.mcap")
+    for twice, message in (([tmp_path / "rec"] * 2, "rec is given twice"),
+                           ([tmp_path / "rec", tmp_path / "other" / ".." / "rec"], "other/../rec are one recording"),
+                           ([tmp_path / "rec", mcap], f"{mcap.name} are one recording")):
+        with pytest.raises(RecordingError, match=message):
+            Recording(twice)
+    with Recording([tmp_path / "rec", tmp_path / "other"]) as rec:
+        assert rec.message_count == 6
+
+
 @pytest.mark.parametrize("keep", [0.5, 0.01])
 def test_truncated_ros1_bag(shared_data, tmp_path, keep):
     src = shared_data / DEMO
@@ -147,6 +163,7 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         (["info", "nowhere.bag"], "nowhere.bag"),
         (["convert", "{demo}", "-o", "{out}", "-t", "/scann"], "/scann"),
         (["convert", "{demo}", "-o", "{out}", "--config", "{cfg}"], "window_ms"),
+        (["convert", "{demo}", "{demo}", "-o", "{out}"], "demo_stationary_simple_environment.bag is given twice"),
         (["info", "{junk}"], "junk.bag"),
         # a pipeline file's [laser] and [tracking] tables: the file, the table and the key, before any reading
         (["track", "{demo}", "-o", "{out}", "-c", "{laser_typo}"], "laser_typo.toml: [laser]: unknown laser "
