@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import subprocess
 import sys
@@ -268,6 +269,30 @@ def test_nan_ranges_and_disordered_messages_do_not_stop_reading(tmp_path):
         out = list(sync(rec.messages()))
     assert [s.t_ns for s in out] == [s.t_ns for s in scans]
     assert np.isnan(out[3].valid_ranges_m()).sum() == np.isnan(scans[3].ranges_m).sum()
+
+
+def test_a_nan_transform_in_tf_static_is_left_out_with_a_warning(tmp_path, caplog):
+    """A /tf_static transform with a NaN quaternion cannot be used: tracking goes on, the transform left out with a
+    warning naming its frames; a pose given by the user (a pipeline file's) places the scanner instead."""
+    from fusiontrack.geometry import make_transform
+    from fusiontrack.laser.detector import detector_for_recording
+    from fusiontrack.tracking import track_recording
+    from fusiontrack.types import Transform
+
+    with RecordingWriter(tmp_path / "r") as w:
+        w.write(Transform(100_000_000, "/tf_static", "world", "laser", [1.0, 2.0, 0.2], [0, 0, 0.3, np.nan], True))
+        for i in range(30):
+            w.write(LaserScan((i + 1) * 100_000_000, "laser", "laser", -1.0, 0.02, 0.02, 5.0,
+                              np.full(100, 3.0, np.float32)))
+    with caplog.at_level(logging.WARNING, logger="fusiontrack"):
+        track_recording(tmp_path / "r")
+    assert any("transform 'laser' -> 'world': its rotation x, y, z, w (0, 0, 0.3, nan) is not a finite" in
+               r.getMessage() for r in caplog.records)
+    given = make_transform(np.eye(3), [4.0, 5.0, 0.0])
+    with Recording(tmp_path / "r") as rec:
+        (topic,) = set(rec.topics()) - {"/tf_static"}
+        _, poses = detector_for_recording(rec, [topic], laser_poses={"laser": given})
+    np.testing.assert_array_equal(poses["laser"], given)
 
 
 def test_cli_version():
