@@ -295,6 +295,38 @@ def test_a_nan_transform_in_tf_static_is_left_out_with_a_warning(tmp_path, caplo
     np.testing.assert_array_equal(poses["laser"], given)
 
 
+def test_an_image_without_pixels_is_skipped_counted_and_warned_about_once(tmp_path, caplog):
+    """0x0 images (width = height = 0, no data) in a recording are unusable frames: each skipped and counted, one
+    warning for them all, as for truncated images; the good images between them still come through."""
+    from fusiontrack.fusion import LazyFrames
+    from fusiontrack.types import Image
+
+    good = np.zeros((4, 6, 3), np.uint8)
+    with RecordingWriter(tmp_path / "r") as w:
+        ts = w.typestore
+        Img, Header, Time = (ts.types[k] for k in ("sensor_msgs/msg/Image", "std_msgs/msg/Header",
+                                                   "builtin_interfaces/msg/Time"))
+        for i in range(6):
+            t = (i + 1) * 100_000_000
+            if i % 2:
+                w.write(Image(t, "cam", "cam", good + i))
+                continue
+            empty = Img(Header(Time(sec=0, nanosec=t), "cam"), 0, 0, "bgr8", 0, 0, np.zeros(0, np.uint8))
+            w._writer.write(w._connection("/cam/image", "sensor_msgs/msg/Image"), t,
+                            ts.serialize_cdr(empty, "sensor_msgs/msg/Image"))
+    with caplog.at_level(logging.WARNING, logger="fusiontrack"), Recording(tmp_path / "r") as rec:
+        images = list(rec.messages(["/cam/image"]))
+        assert [im.pixels[0, 0, 0] for im in images] == [1, 3, 5]
+        assert rec.skipped == {"/cam/image": 3}
+        frames = LazyFrames(rec, "/cam/image", max_dt_ns=1000)
+        got = [frames.at((i + 1) * 100_000_000) for i in range(6)]
+        frames.warn_unreadable()
+    assert [g is not None for g in got] == [False, True, False, True, False, True]
+    warned = [r.getMessage() for r in caplog.records]
+    assert len(warned) == 2, warned  # one from each reader
+    assert "image of 0x0 bgr8 holds no pixels" in warned[0]
+    assert "/cam/image: 3 of the 6 images converted were unreadable and skipped" in warned[1]
+
 def test_cli_version():
     result = _cli("--version")
     assert result.returncode == 0
