@@ -211,3 +211,24 @@ def test_the_readme_names_every_built_in_scenario_and_the_class_column():
     assert sorted(n.strip() for n in line.split("#", 1)[1].split(",")) == builtin_names()
     assert "class" in TRACKS_CSV_COLUMNS
     assert "`cls` in tracks.csv" not in text
+
+
+def test_the_readme_cli_reference_lists_every_command_with_options_it_has():
+    """The README's CLI reference has a row for every command, and every option it names (in its row, or for track
+    in the per-pipeline list) is one of that command's options: nothing missing, nothing invented."""
+    import re
+
+    import typer
+
+    from fusiontrack.cli import app
+
+    group = typer.main.get_command(app)
+    section = README.read_text(encoding="utf-8").split("## CLI reference", 1)[1].split("\n## ", 1)[0]
+    rows = {m.group(1): m.group(2) for m in re.finditer(r"^\| `([a-z-]+)[^`]*` \|(.*)$", section, re.M)}
+    assert sorted(rows) == sorted(group.commands)
+    rows["track"] += section.split("`track` options by pipeline:", 1)[1]
+    for name, text in rows.items():
+        params = group.commands[name].params
+        known = {o for p in params for o in (*p.opts, *p.secondary_opts)}
+        named = set(re.findall(r"(?<![\w-])(--?[a-z][a-z-]*)", text))
+        assert named <= known, (name, sorted(named - known))
