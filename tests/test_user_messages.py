@@ -232,3 +232,20 @@ def test_the_readme_cli_reference_lists_every_command_with_options_it_has():
         known = {o for p in params for o in (*p.opts, *p.secondary_opts)}
         named = set(re.findall(r"(?<![\w-])(--?[a-z][a-z-]*)", text))
         assert named <= known, (name, sorted(named - known))
+
+
+def test_help_shows_the_pipeline_file_tables_it_names():
+    """--help is rendered as rich markup, where [laser] would be a style tag and vanish: the tables a help text
+    names are escaped and shown."""
+    from typer.testing import CliRunner
+
+    from fusiontrack.cli import app
+
+    def help_of(command: str) -> str:
+        result = CliRunner().invoke(app, [command, "--help"], env={"COLUMNS": "300"})
+        assert result.exit_code == 0, result.output
+        return " ".join(result.output.replace("│", " ").split())
+
+    assert "clock offsets, [laser] and [tracking] parameters" in help_of("track")
+    assert "(or [traffic] calibration = FILE in the pipeline file)" in help_of("track")
+    assert "laser poses (``[sensors.<name>] pose``) become" in help_of("convert")

@@ -251,7 +251,7 @@ def convert(
 ) -> None:
     """Convert recordings into one time-synchronised rosbag2 (MCAP by default) with standard ROS types.
 
-    A pipeline file's laser poses (``[sensors.<name>] pose``) become ``/tf_static`` transforms from ``world`` to
+    A pipeline file's laser poses (``\\[sensors.<name>] pose``) become ``/tf_static`` transforms from ``world`` to
     each scanner's frame, replacing the recording's own for those frames: the new recording is posed as the
     pipeline file poses it, without the file."""
     from .io.recording import Recording
@@ -439,7 +439,7 @@ def track(
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder for tracks, events and video.")],
     pipeline: Annotated[str, typer.Option(help=f"One of: {', '.join(PIPELINES)}.")] = "people-laser",
     config: Annotated[Path | None, typer.Option("--config", "-c", help="Pipeline file: sensors, topics, clock "
-                                                "offsets, [laser] and [tracking] parameters.")] = None,
+                                                "offsets, \\[laser] and \\[tracking] parameters.")] = None,
     tracker_kind: Annotated[str, typer.Option("--tracker", help="pf (two-feet particle filters) or kalman "
                                               "(constant-velocity baseline).")] = "pf",
     time_source: Annotated[str, typer.Option("--time", help="header (capture stamps) or log (recorder).")] = "header",
@@ -475,7 +475,7 @@ def track(
                                        "10 s stopped, 30 s jam) or the 'learned' behaviour model (alarms within "
                                        "about 2 s).")] = "rules",
     calibration: Annotated[Path | None, typer.Option(help="traffic: road calibration JSON from `fusiontrack "
-                                                     "calibrate-road` (or [traffic] calibration = FILE in the "
+                                                     "calibrate-road` (or \\[traffic] calibration = FILE in the "
                                                      "pipeline file); the sensors it names are posed by it instead "
                                                      "of the recording's /tf_static.")] = None,
     workers: Annotated[int | None, typer.Option(help="traffic: camera branches in this many worker processes "
