@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -34,6 +36,22 @@ def test_a_file_that_is_not_a_bag(tmp_path):
     other.write_text("hello")
     with pytest.raises(RecordingError, match=r"notes\.txt.*expected a ROS 1 \.bag"):
         Recording(other)
+
+
+def test_a_recording_given_twice_is_refused(tmp_path):
+    """The same recording twice (by the same path, another spelling of it, or a rosbag2 folder and its .mcap) would
+    be merged with itself; two different recordings still merge."""
+    scans = [LaserScan(i * 100_000_000, "laser", "laser", -1.0, 0.01, 0.02, 5.0, np.ones(21)) for i in range(1, 4)]
+    write_recording(tmp_path / "rec", scans)
+    write_recording(tmp_path / "other", scans)
+    (mcap,) = (tmp_path / "rec").glob("*.mcap")
+    for twice, message in (([tmp_path / "rec"] * 2, "rec is given twice"),
+                           ([tmp_path / "rec", tmp_path / "other" / ".." / "rec"], "other/../rec are one recording"),
+                           ([tmp_path / "rec", mcap], f"{mcap.name} are one recording")):
+        with pytest.raises(RecordingError, match=message):
+            Recording(twice)
+    with Recording([tmp_path / "rec", tmp_path / "other"]) as rec:
+        assert rec.message_count == 6
 
 
 @pytest.mark.parametrize("keep", [0.5, 0.01])
@@ -146,6 +164,7 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         (["info", "nowhere.bag"], "nowhere.bag"),
         (["convert", "{demo}", "-o", "{out}", "-t", "/scann"], "/scann"),
         (["convert", "{demo}", "-o", "{out}", "--config", "{cfg}"], "window_ms"),
+        (["convert", "{demo}", "{demo}", "-o", "{out}"], "demo_stationary_simple_environment.bag is given twice"),
         (["info", "{junk}"], "junk.bag"),
         # a pipeline file's [laser] and [tracking] tables: the file, the table and the key, before any reading
         (["track", "{demo}", "-o", "{out}", "-c", "{laser_typo}"], "laser_typo.toml: [laser]: unknown laser "
@@ -166,6 +185,7 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         (["eval", "{tracks}", "{demo}", "-o", "{a_dir}"], "is a folder"),
         (["fit-step-model", "walk.csv", "-l", "10", "-o", "{a_dir}"], "is a folder"),
         # eval's own options
+        (["eval", "{binary}", "{demo}"], "binary.png: not a UTF-8 text file (expected JSON lines"),
         (["eval", "{tracks}", "{demo}", "--time", "lgo"], "--time: expected 'header' or 'log', got 'lgo'"),
         (["eval", "{tracks}", "{demo}", "--topic", "/gt_wrong"], "/gt_wrong"),
         (["eval", "{mot}", "{a_dir}"], "a_dir: a folder that is not a recording"),
@@ -181,6 +201,15 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
           "--dry-run"], "two_points.csv: 2 control points given, at least 4 are needed"),
         (["calibrate", "camera_0", "-c", "{hall}", "--points", "{two_points}", "--dry-run"],
          "camera_0: its intrinsics are needed: give --intrinsics"),
+        # intrinsics and a learning rate that cannot be used: the option, before any reading
+        (["calibrate", "camera_0", "-c", "{hall}", "--points", "{two_points}", "--intrinsics=-500,500,320,240",
+          "--dry-run"], "--intrinsics: expected focal lengths fx, fy > 0 (pixels), got fx=-500, fy=500"),
+        (["calibrate", "camera_0", "-c", "{hall}", "--points", "{two_points}", "--intrinsics", "500,nan,320,240",
+          "--dry-run"], "--intrinsics: expected finite numbers, got '500,nan,320,240'"),
+        (["calibrate", "camera_0", "-c", "{hall}", "--adaptive", "{demo}", "--rho", "-1", "--dry-run"],
+         "--rho: expected a learning rate in (0, 1], got -1.0"),
+        (["calibrate", "camera_0", "-c", "{hall}", "--adaptive", "{demo}", "--rho", "nan", "--dry-run"],
+         "--rho: expected a learning rate in (0, 1], got nan"),
     ],
 )
 def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args, expected):
@@ -198,6 +227,7 @@ def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args
     for name, text in tables.items():
         (tmp_path / f"{name}.toml").write_text(text)
     (tmp_path / "a_file").write_text("")
+    (tmp_path / "binary.png").write_bytes(bytes(range(128, 256)) * 8)
     (tmp_path / "a_dir").mkdir()
     (tmp_path / "hall.toml").write_text('[sensors.camera_0]\nkind = "camera"\ntopic = "/camera_0/image"\n'
                                         'pose = { x = 0.0, y = 0.0, z = 3.0, yaw_deg = 0.0 }\n')
@@ -209,7 +239,7 @@ def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args
              "legs": str(shared_data / "laser/leg_tracker_demo/training/positive_1_extracted.bag"),
              "a_file": str(tmp_path / "a_file"), "a_dir": str(tmp_path / "a_dir"), "tracks": str(tracks),
              "hall": str(tmp_path / "hall.toml"), "two_points": str(tmp_path / "two_points.csv"),
-             "mot": str(tmp_path / "det.txt"),
+             "mot": str(tmp_path / "det.txt"), "binary": str(tmp_path / "binary.png"),
              **{name: str(tmp_path / f"{name}.toml") for name in tables}}
     result = _cli(*[a.format(**subst) for a in args])
     assert result.returncode == 2
@@ -240,6 +270,62 @@ def test_nan_ranges_and_disordered_messages_do_not_stop_reading(tmp_path):
     assert [s.t_ns for s in out] == [s.t_ns for s in scans]
     assert np.isnan(out[3].valid_ranges_m()).sum() == np.isnan(scans[3].ranges_m).sum()
 
+
+def test_a_nan_transform_in_tf_static_is_left_out_with_a_warning(tmp_path, caplog):
+    """A /tf_static transform with a NaN quaternion cannot be used: tracking goes on, the transform left out with a
+    warning naming its frames; a pose given by the user (a pipeline file's) places the scanner instead."""
+    from fusiontrack.geometry import make_transform
+    from fusiontrack.laser.detector import detector_for_recording
+    from fusiontrack.tracking import track_recording
+    from fusiontrack.types import Transform
+
+    with RecordingWriter(tmp_path / "r") as w:
+        w.write(Transform(100_000_000, "/tf_static", "world", "laser", [1.0, 2.0, 0.2], [0, 0, 0.3, np.nan], True))
+        for i in range(30):
+            w.write(LaserScan((i + 1) * 100_000_000, "laser", "laser", -1.0, 0.02, 0.02, 5.0,
+                              np.full(100, 3.0, np.float32)))
+    with caplog.at_level(logging.WARNING, logger="fusiontrack"):
+        track_recording(tmp_path / "r")
+    assert any("transform 'laser' -> 'world': its rotation x, y, z, w (0, 0, 0.3, nan) is not a finite" in
+               r.getMessage() for r in caplog.records)
+    given = make_transform(np.eye(3), [4.0, 5.0, 0.0])
+    with Recording(tmp_path / "r") as rec:
+        (topic,) = set(rec.topics()) - {"/tf_static"}
+        _, poses = detector_for_recording(rec, [topic], laser_poses={"laser": given})
+    np.testing.assert_array_equal(poses["laser"], given)
+
+
+def test_an_image_without_pixels_is_skipped_counted_and_warned_about_once(tmp_path, caplog):
+    """0x0 images (width = height = 0, no data) in a recording are unusable frames: each skipped and counted, one
+    warning for them all, as for truncated images; the good images between them still come through."""
+    from fusiontrack.fusion import LazyFrames
+    from fusiontrack.types import Image
+
+    good = np.zeros((4, 6, 3), np.uint8)
+    with RecordingWriter(tmp_path / "r") as w:
+        ts = w.typestore
+        Img, Header, Time = (ts.types[k] for k in ("sensor_msgs/msg/Image", "std_msgs/msg/Header",
+                                                   "builtin_interfaces/msg/Time"))
+        for i in range(6):
+            t = (i + 1) * 100_000_000
+            if i % 2:
+                w.write(Image(t, "cam", "cam", good + i))
+                continue
+            empty = Img(Header(Time(sec=0, nanosec=t), "cam"), 0, 0, "bgr8", 0, 0, np.zeros(0, np.uint8))
+            w._writer.write(w._connection("/cam/image", "sensor_msgs/msg/Image"), t,
+                            ts.serialize_cdr(empty, "sensor_msgs/msg/Image"))
+    with caplog.at_level(logging.WARNING, logger="fusiontrack"), Recording(tmp_path / "r") as rec:
+        images = list(rec.messages(["/cam/image"]))
+        assert [im.pixels[0, 0, 0] for im in images] == [1, 3, 5]
+        assert rec.skipped == {"/cam/image": 3}
+        frames = LazyFrames(rec, "/cam/image", max_dt_ns=1000)
+        got = [frames.at((i + 1) * 100_000_000) for i in range(6)]
+        frames.warn_unreadable()
+    assert [g is not None for g in got] == [False, True, False, True, False, True]
+    warned = [r.getMessage() for r in caplog.records]
+    assert len(warned) == 2, warned  # one from each reader
+    assert "image of 0x0 bgr8 holds no pixels" in warned[0]
+    assert "/cam/image: 3 of the 6 images converted were unreadable and skipped" in warned[1]
 
 def test_cli_version():
     result = _cli("--version")
@@ -273,6 +359,43 @@ def test_a_recording_without_lasers_points_to_the_camera_pipeline(shared_data):
     assert message.startswith(f"{bag}:")
     assert "/hero/head_rgbd_sensor/rgb/image_raw" in message
     assert "--pipeline people-camera" in message
+
+
+def test_an_output_that_cannot_be_written_is_one_line_naming_it(tmp_path):
+    """The OS refusing an output (a file where a folder is needed, a full disk: /dev/full, a read-only folder when
+    not root) ends as one line naming the path and the OS's reason, exit code 2, whichever command writes it."""
+    from fusiontrack.io.tracks import write_tracks_csv
+    from fusiontrack.types import TrackState
+
+    write_tracks_csv(tmp_path / "tracks.csv", [TrackState(10**9, "laser", 1, np.zeros(2), np.zeros(2))])
+    (tmp_path / "gt.csv").write_text("t,id,x,y\n1.0,1,0.0,0.0\n")
+    (tmp_path / "a_file").write_text("")
+    def eval_to(name: str) -> list[str]:
+        return ["eval", str(tmp_path / "tracks.csv"), str(tmp_path / "gt.csv"), "-o", str(tmp_path / name)]
+
+    cases = [(eval_to("a_file/m.json"), f"{tmp_path / 'a_file'}: [Errno 17] File exists and is not a folder")]
+    if Path("/dev/full").exists():  # writes to it fail: no space left on device
+        (tmp_path / "full.json").symlink_to("/dev/full")
+        cases.append((eval_to("full.json"),
+                      f"cannot write {tmp_path / 'full.json'}: [Errno 28] No space left on device"))
+        with RecordingWriter(tmp_path / "rec") as w:
+            for i in range(20):
+                w.write(LaserScan((i + 1) * 100_000_000, "laser", "laser", -1.0, 0.02, 0.02, 5.0,
+                                  np.full(100, 3.0, np.float32)))
+        (tmp_path / "out").mkdir()
+        (tmp_path / "out" / "tracks.csv").symlink_to("/dev/full")
+        cases.append((["track", str(tmp_path / "rec"), "-o", str(tmp_path / "out"), "--no-video"],
+                      f"cannot write {tmp_path / 'out' / 'tracks.csv'}: [Errno 28] No space left on device"))
+    if os.geteuid() != 0:  # root writes into a read-only folder anyway
+        (tmp_path / "ro").mkdir(mode=0o500)
+        cases.append((eval_to("ro/m.json"), f"{tmp_path / 'ro' / 'm.json'}: [Errno 13]"))
+    for args, expected in cases:
+        result = _cli(*args)
+        assert result.returncode == 2, result.stderr
+        lines = [ln for ln in result.stderr.splitlines() if ln.strip()]
+        assert len(lines) == 1, result.stderr
+        assert lines[0].startswith("error: ")
+        assert expected in lines[0]
 
 
 def test_a_failed_camera_run_leaves_no_empty_folder(tmp_path):

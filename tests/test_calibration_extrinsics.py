@@ -276,3 +276,21 @@ def test_calibrate_command_line(scene, tmp_path):
     bad = subprocess.run(cmd[:7], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2
     assert "exactly one of --points CSV or --adaptive RECORDING" in bad.stderr
+
+
+@pytest.mark.parametrize("fx", [0.0, float("nan")])
+def test_a_recordings_camera_info_without_intrinsics_is_named(scene, tmp_path, fx):
+    """A CameraInfo of an uncalibrated camera (K all zeros) or a damaged one (NaN): a RecordingError naming the
+    recording and the camera, not OpenCV's check of the matrix."""
+    from fusiontrack.io.writer import RecordingWriter
+    from fusiontrack.types import CameraInfo
+
+    pipeline = tmp_path / "pipeline.toml"
+    pipeline.write_text(PIPELINE, encoding="utf-8")
+    csv = tmp_path / "points.csv"
+    rows = "\n".join(",".join(f"{v:.6f}" for v in row) for row in np.hstack([scene["points"], scene["pixels"]]))
+    csv.write_text("x_m,y_m,z_m,u_px,v_px\n" + rows + "\n", encoding="utf-8")
+    with RecordingWriter(tmp_path / "rec") as w:
+        w.write(CameraInfo(10**9, "camera_0", "camera_0", 640, 480, np.where(K != 0, fx, 0.0)))
+    with pytest.raises(RecordingError, match=r"rec: the CameraInfo of camera 'camera_0' holds no usable intrinsics"):
+        calibrate_from_points(pipeline, "camera_0", csv, reference="laser_0", recording=tmp_path / "rec", write=False)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -235,6 +236,39 @@ def test_train_classifier_writes_a_model_that_loads(shared_data, tmp_path):
     assert model.classes == ("person", "bicycle", "car")
     assert model.alpha.size == 20
 
+
+def test_train_classifier_leaves_the_shipped_model_alone_unless_told(tmp_path, monkeypatch):
+    """Without -o the model goes to the working directory, not into the installed package; --into-package (and
+    only it) replaces the shipped model; both at once is refused. (Training stubbed: only where it writes.)"""
+    import fusiontrack.laser.classifier as classifier
+    from fusiontrack.cli import main
+
+    saved = []
+
+    class Model:
+        def save(self, path):
+            saved.append(Path(path).resolve())
+
+    report = {"sources": {}, "classes": {}, "balanced_accuracy": 1.0}
+    monkeypatch.setattr(classifier, "train_default", lambda *a, **k: (Model(), report))
+    monkeypatch.setattr(classifier, "default_model_path", lambda: tmp_path / "package" / "object_classifier.json")
+    monkeypatch.chdir(tmp_path)
+
+    def cli(*args):
+        monkeypatch.setattr(sys, "argv", ["fusiontrack", "train-classifier", *args])
+        try:
+            main()
+        except SystemExit as err:
+            return err.code
+        return 0
+
+    assert cli() == 0
+    assert saved == [tmp_path / "object_classifier.json"]
+    assert cli("--into-package") == 0
+    assert saved[-1] == tmp_path / "package" / "object_classifier.json"
+    assert cli("--into-package", "-o", "m.json") == 2
+    assert cli("-o", str(tmp_path)) == 2  # a folder: refused, naming it
+    assert len(saved) == 2
 
 def test_track_people_writes_the_bias_and_the_overlay(tmp_path):
     # The fused people pipeline from the command line: a crowd whose camera is 3 degrees off its calibration.

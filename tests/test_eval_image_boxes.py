@@ -192,6 +192,17 @@ def test_states_far_from_every_image_are_warned_about(truth, caplog):
     assert any(f"{len(many)} of {len(own) + len(many)} states" in r.getMessage() for r in caplog.records)
 
 
+def test_no_image_boxes_score_as_misses_with_a_warning_naming_the_file(truth, rec, tmp_path, caplog):
+    """An empty tracks.jsonl scored against a camera's truth boxes: every box missed, and a warning says why."""
+    frames, w, h = truth
+    (tmp_path / "none").mkdir()
+    (tmp_path / "none" / "tracks.jsonl").write_text("")
+    with caplog.at_level(logging.WARNING, logger="fusiontrack"):
+        out = cli_eval(str(tmp_path / "none"), str(rec), "--camera", "camera_0")
+    assert (out["metrics"]["tp"], out["metrics"]["fn"]) == (0, visible_people(frames, w, h))
+    assert any(f"no track states with image boxes in {tmp_path / 'none' / 'tracks.jsonl'}" in r.getMessage()
+               for r in caplog.records)
+
 def test_mot_rows_without_camera_take_it_from_the_tracks_beside_them(truth, rec, tmp_path):
     frames, w, h = truth
     folder = write_output(tmp_path / "mot", truth_states(frames, w, h), frames)

@@ -98,3 +98,20 @@ def test_times_in_nanoseconds_and_unsorted_rows(tmp_path):
     assert frames[0].ids.tolist() == [4, 7]
     assert frames[0].classes == ("car", "person")
     np.testing.assert_array_equal(frames[1].positions_m, [[1.0, 2.0]])
+
+
+@pytest.mark.parametrize("tracks", ["run/tracks.jsonl", "run", "header_only.csv"])
+def test_eval_of_no_track_states_scores_but_says_so(tmp_path, tracks):
+    """An empty tracks file (a run that tracked nobody) still scores, every truth position missed, but a warning
+    names the file: a MOTA of 0 is never silent."""
+    (tmp_path / "gt.csv").write_text("t,id,x,y\n0.0,1,1.0,2.0\n0.1,1,1.1,2.0\n")
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "tracks.jsonl").write_text("")
+    write_tracks_csv(tmp_path / "header_only.csv", [])
+    result = subprocess.run([sys.executable, "-m", "fusiontrack", "eval", str(tmp_path / tracks),
+                             str(tmp_path / "gt.csv"), "-o", str(tmp_path / "m.json")],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    named = tmp_path / (tracks if tracks.endswith((".jsonl", ".csv")) else f"{tracks}/tracks.jsonl")
+    assert f"no track states in {named}" in " ".join(result.stderr.split())
+    assert json.loads((tmp_path / "m.json").read_text())["metrics"]["fn"] == 2

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import cv2
 import numpy as np
@@ -148,6 +149,22 @@ def test_tree_add_record():
     out = g.transform_points(tree.get("laser", "base"), [[1.0, 0.0, 0.0]])
     np.testing.assert_allclose(out, [[1.0, 3.0, 0.3]], atol=1e-12)
 
+
+@pytest.mark.parametrize(("translation", "rotation", "named"), [
+    ([1.0, 2.0, 0.3], [0, 0, 0.5, float("nan")], "its rotation x, y, z, w (0, 0, 0.5, nan) is not a finite non-zero"),
+    ([1.0, 2.0, 0.3], [0, 0, 0, 0], "its rotation x, y, z, w (0, 0, 0, 0) is not a finite non-zero quaternion"),
+    ([float("nan"), 2.0, 0.3], [0, 0, 0, 1], "its translation (nan, 2, 0.3) is not finite"),
+])
+def test_tree_add_record_refuses_a_transform_that_cannot_be_used(translation, rotation, named):
+    """A NaN (or zero) quaternion or a NaN translation, as in a damaged /tf_static: a ConfigError naming the frames
+    and what is wrong (as add's other refusals, which callers reading a recording warn about), not scipy's
+    ValueError; the edge is not added."""
+    tf = Transform(t_ns=0, sensor="/tf_static", parent_frame="world", child_frame="laser",
+                   translation_m=translation, rotation_xyzw=rotation, static=True)
+    tree = g.TransformTree()
+    with pytest.raises(ConfigError, match=re.escape(f"transform 'laser' -> 'world': {named}")):
+        tree.add_record(tf)
+    assert not tree.has_path("laser", "world")
 
 def test_transform_points_floor_points_with_4x4():
     T = g.make_transform(g.yaw_to_matrix(0.5), [1.0, 2.0, 0.7])

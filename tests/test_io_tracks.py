@@ -14,6 +14,7 @@ from fusiontrack.io.tracks import (
     format_time_s,
     group_tracks,
     parse_time_s,
+    read_ground_truth_csv,
     read_jsonl,
     read_mot,
     read_tracks_csv,
@@ -295,3 +296,14 @@ def test_jsonl_errors(tmp_path: Path) -> None:
         write_jsonl(p, [Track(1, ())])
     with pytest.raises(ConfigError, match="cannot write a value of type object"):
         write_jsonl(p, [Event(0, "e", "k", attributes={"x": object()})])
+
+
+@pytest.mark.parametrize("name", ["tracks.jsonl", "tracks.csv", "gt.csv", "tracks.png"])
+def test_a_binary_file_is_named_as_not_text(tmp_path: Path, name: str) -> None:
+    """Random bytes given for a text file (a tracks file, a picture): a RecordingError naming the file, not a
+    UnicodeDecodeError from deep in the reader."""
+    p = tmp_path / name
+    p.write_bytes(bytes(np.random.default_rng(0).integers(0, 256, 2000, dtype=np.uint8)))
+    reader = read_ground_truth_csv if name == "gt.csv" else read_tracks_csv if name.endswith(".csv") else read_jsonl
+    with pytest.raises(RecordingError, match=rf"{name}: not a UTF-8 text file \(expected "):
+        reader(p)

@@ -211,3 +211,41 @@ def test_the_readme_names_every_built_in_scenario_and_the_class_column():
     assert sorted(n.strip() for n in line.split("#", 1)[1].split(",")) == builtin_names()
     assert "class" in TRACKS_CSV_COLUMNS
     assert "`cls` in tracks.csv" not in text
+
+
+def test_the_readme_cli_reference_lists_every_command_with_options_it_has():
+    """The README's CLI reference has a row for every command, and every option it names (in its row, or for track
+    in the per-pipeline list) is one of that command's options: nothing missing, nothing invented."""
+    import re
+
+    import typer
+
+    from fusiontrack.cli import app
+
+    group = typer.main.get_command(app)
+    section = README.read_text(encoding="utf-8").split("## CLI reference", 1)[1].split("\n## ", 1)[0]
+    rows = {m.group(1): m.group(2) for m in re.finditer(r"^\| `([a-z-]+)[^`]*` \|(.*)$", section, re.M)}
+    assert sorted(rows) == sorted(group.commands)
+    rows["track"] += section.split("`track` options by pipeline:", 1)[1]
+    for name, text in rows.items():
+        params = group.commands[name].params
+        known = {o for p in params for o in (*p.opts, *p.secondary_opts)}
+        named = set(re.findall(r"(?<![\w-])(--?[a-z][a-z-]*)", text))
+        assert named <= known, (name, sorted(named - known))
+
+
+def test_help_shows_the_pipeline_file_tables_it_names():
+    """--help is rendered as rich markup, where [laser] would be a style tag and vanish: the tables a help text
+    names are escaped and shown."""
+    from typer.testing import CliRunner
+
+    from fusiontrack.cli import app
+
+    def help_of(command: str) -> str:
+        result = CliRunner().invoke(app, [command, "--help"], env={"COLUMNS": "300"})
+        assert result.exit_code == 0, result.output
+        return " ".join(result.output.replace("│", " ").split())
+
+    assert "clock offsets, [laser] and [tracking] parameters" in help_of("track")
+    assert "(or [traffic] calibration = FILE in the pipeline file)" in help_of("track")
+    assert "laser poses (``[sensors.<name>] pose``) become" in help_of("convert")

@@ -251,7 +251,7 @@ def convert(
 ) -> None:
     """Convert recordings into one time-synchronised rosbag2 (MCAP by default) with standard ROS types.
 
-    A pipeline file's laser poses (``[sensors.<name>] pose``) become ``/tf_static`` transforms from ``world`` to
+    A pipeline file's laser poses (``\\[sensors.<name>] pose``) become ``/tf_static`` transforms from ``world`` to
     each scanner's frame, replacing the recording's own for those frames: the new recording is posed as the
     pipeline file poses it, without the file."""
     from .io.recording import Recording
@@ -439,7 +439,7 @@ def track(
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder for tracks, events and video.")],
     pipeline: Annotated[str, typer.Option(help=f"One of: {', '.join(PIPELINES)}.")] = "people-laser",
     config: Annotated[Path | None, typer.Option("--config", "-c", help="Pipeline file: sensors, topics, clock "
-                                                "offsets, [laser] and [tracking] parameters.")] = None,
+                                                "offsets, \\[laser] and \\[tracking] parameters.")] = None,
     tracker_kind: Annotated[str, typer.Option("--tracker", help="pf (two-feet particle filters) or kalman "
                                               "(constant-velocity baseline).")] = "pf",
     time_source: Annotated[str, typer.Option("--time", help="header (capture stamps) or log (recorder).")] = "header",
@@ -475,7 +475,7 @@ def track(
                                        "10 s stopped, 30 s jam) or the 'learned' behaviour model (alarms within "
                                        "about 2 s).")] = "rules",
     calibration: Annotated[Path | None, typer.Option(help="traffic: road calibration JSON from `fusiontrack "
-                                                     "calibrate-road` (or [traffic] calibration = FILE in the "
+                                                     "calibrate-road` (or \\[traffic] calibration = FILE in the "
                                                      "pipeline file); the sensors it names are posed by it instead "
                                                      "of the recording's /tf_static.")] = None,
     workers: Annotated[int | None, typer.Option(help="traffic: camera branches in this many worker processes "
@@ -797,12 +797,19 @@ def _track_camera(sources: list[Path], output: Path, *, detections: Path | None,
         console.print(f"overlay: {overlay} ({stats.n_frames} frames)")
 
 
+def _tracks_file(path: Path) -> Path:
+    """The tracks file ``path`` names: itself, or in a folder of `fusiontrack track` its tracks.jsonl (else
+    tracks.csv)."""
+    if path.is_dir():
+        return path / "tracks.jsonl" if (path / "tracks.jsonl").exists() else path / "tracks.csv"
+    return path
+
+
 def _read_tracks(path: Path) -> tuple[list[Any], list[Any]]:
     from .io.tracks import read_jsonl, read_tracks_csv
     from .types import Event, TrackState
 
-    if path.is_dir():
-        path = path / "tracks.jsonl" if (path / "tracks.jsonl").exists() else path / "tracks.csv"
+    path = _tracks_file(path)
     if path.suffix == ".csv":
         return read_tracks_csv(path), []
     records = read_jsonl(path)
@@ -924,6 +931,8 @@ def eval_(
         result["metrics"] = metrics.to_dict()
     else:
         states, events = _read_tracks(tracks)
+        if not states:  # a run that tracked nobody scores, but not silently
+            log.warning("no track states in %s: every ground-truth position counts as missed", _tracks_file(tracks))
         frames, gt_topic = _read_truth(ground_truth, topic, time_source)
         scored, label = frames, f"{tracks.name} vs {gt_topic}"
         if at is not None:
@@ -1007,6 +1016,8 @@ def _eval_image_boxes(tracks: Path, recording: Path, camera: str | None, time_so
     states = ([r for r in read_jsonl(source) if isinstance(r, TrackState) and r.box_px is not None]
               if source.suffix == ".jsonl" else None)
     auto = camera is None
+    if states is not None and not states and camera is not None:
+        log.warning("no track states with image boxes in %s: every truth box counts as missed", source)
     if camera is None and states is None:  # MOT rows: their camera is that of the tracks.jsonl beside them
         sibling = source.parent / "tracks.jsonl"
         cams = cameras_of([r for r in read_jsonl(sibling) if isinstance(r, TrackState) and r.box_px is not None]) \
@@ -1055,6 +1066,27 @@ def _bounds_of(recording: Path) -> Any:
 # --------------------------------------------------------------------------------------------------
 
 
+def _parse_intrinsics(text: str) -> tuple[Any, Any]:
+    """``--intrinsics fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]`` as (K, distortion or None); a ConfigError naming the option
+    for anything but finite numbers with focal lengths fx, fy > 0."""
+    import math
+
+    import numpy as np
+
+    try:
+        vals = [float(v) for v in text.split(",")]
+    except ValueError as err:
+        raise ConfigError(f"--intrinsics: expected numbers fx,fy,cx,cy[,...], got {text!r}") from err
+    if len(vals) not in (4, 8, 9):
+        raise ConfigError(f"--intrinsics: expected 4, 8 or 9 numbers, got {len(vals)}")
+    if not all(math.isfinite(v) for v in vals):
+        raise ConfigError(f"--intrinsics: expected finite numbers, got {text!r}")
+    fx, fy, cx, cy = vals[:4]
+    if fx <= 0 or fy <= 0:
+        raise ConfigError(f"--intrinsics: expected focal lengths fx, fy > 0 (pixels), got fx={fx:g}, fy={fy:g}")
+    return np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), np.array(vals[4:]) if len(vals) > 4 else None
+
+
 @app.command()
 def calibrate(
     camera: Annotated[str, typer.Argument(help="The camera's sensor name in the pipeline file.")],
@@ -1083,17 +1115,10 @@ def calibrate(
 
     if (points is None) == (adaptive is None):
         raise ConfigError("calibrate: give exactly one of --points CSV or --adaptive RECORDING")
+    if not 0.0 < rho <= 1.0:  # (NaN too)
+        raise ConfigError(f"--rho: expected a learning rate in (0, 1], got {rho}")
     if points is not None:
-        intr: Any = None
-        if intrinsics is not None:
-            try:
-                vals = [float(v) for v in intrinsics.split(",")]
-            except ValueError as err:
-                raise ConfigError(f"--intrinsics: expected numbers fx,fy,cx,cy[,...], got {intrinsics!r}") from err
-            if len(vals) not in (4, 8, 9):
-                raise ConfigError(f"--intrinsics: expected 4, 8 or 9 numbers, got {len(vals)}")
-            fx, fy, cx, cy = vals[:4]
-            intr = (np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), np.array(vals[4:]) if len(vals) > 4 else None)
+        intr = _parse_intrinsics(intrinsics) if intrinsics is not None else None
         from .errors import CalibrationError
 
         try:
@@ -1171,7 +1196,10 @@ def calibrate_road_command(
 @app.command(name="train-classifier")
 def train_classifier(
     output: Annotated[Path | None, typer.Option("--output", "-o", help="Where to write the model (JSON); default: "
-                                                "the one shipped in the package, which the tracker uses.")] = None,
+                                                "object_classifier.json in the working directory.")] = None,
+    into_package: Annotated[bool, typer.Option("--into-package", help="Instead of --output, replace the model "
+                                               "shipped in the package (laser/models/object_classifier.json), the "
+                                               "one the tracker uses.")] = False,
     work: Annotated[Path, typer.Option(help="Folder for the simulated training recordings (reused if there).")]
     = Path("out/classifier"),
     data: Annotated[Path, typer.Option(help="The shared data folder (leg_tracker's training bags).")]
@@ -1180,17 +1208,22 @@ def train_classifier(
     road_seconds: Annotated[float, typer.Option(help="Length of each simulated road run.")] = 90.0,
     rounds: Annotated[int, typer.Option(help="Boosting rounds (B18: 100).")] = 100,
 ) -> None:
-    """Rebuild the person / bicycle / car classifier of laser segments (B18) from simulated and real data."""
-    from .laser.classifier import default_model_path, train_default
+    """Train the person / bicycle / car classifier of laser segments (B18) from simulated and real data.
+
+    The tracker classifies with the model shipped in the package; no pipeline-file key loads another. A model
+    written to --output is for comparing, or for Python: TrackClassifier(ObjectClassifier.load(FILE)).
+    --into-package rebuilds the shipped one (in a source checkout: the file in the repository).
+    """
+    from .laser.classifier import MODEL_FILE, default_model_path, train_default
 
     if rounds < 1:
         raise ConfigError(f"--rounds: expected >= 1, got {rounds}")
-    if output is not None:
-        _out_file(output, "object_classifier.json")
+    if into_package and output is not None:
+        raise ConfigError(f"--into-package writes {default_model_path()}: give it or --output, not both")
+    target = default_model_path() if into_package else _out_file(output or Path(MODEL_FILE), MODEL_FILE)
     with console.status("training") as status:
         model, report = train_default(work, crowd_seconds=crowd_seconds, road_seconds=road_seconds, data_dir=data,
                                       n_rounds=rounds, progress=lambda msg: status.update(msg))
-    target = output if output is not None else default_model_path()
     model.save(target)
     table = Table(show_edge=False, header_style="bold", title="held-out test (simulator seed 2; real: last 30 %)")
     for col in ("source / class", "train", "test", "accuracy / recall"):
@@ -1340,14 +1373,56 @@ def demo(
                   f"({real_video.frames} frames); summary: {output / 'summary.json'}")
 
 
+def _open_file_of(err: BaseException) -> Any:
+    """The file the failing code had open for writing when ``err`` was raised (its innermost such local), or None:
+    a write that fails on a full disk raises an OSError without a file name."""
+    import io
+
+    frames = []
+    tb = err.__traceback__
+    while tb is not None:
+        frames.append(tb.tb_frame)
+        tb = tb.tb_next
+    for frame in reversed(frames):
+        for value in frame.f_locals.values():
+            if isinstance(value, io.IOBase) and isinstance(getattr(value, "name", None), str) \
+                    and set(getattr(value, "mode", "")) & set("wax+"):
+                return value
+    return None
+
+
+def os_error_line(err: OSError) -> str:
+    """One line for an OSError that reached the command line (writing the outputs: a read-only, full or missing
+    folder; the readers name their own files): the path, when the error or the failing code's open file gives it,
+    and the OS's reason, e.g. ``cannot write out/x/tracks.csv: [Errno 28] No space left on device``."""
+    import errno
+
+    reason = f"[Errno {err.errno}] {err.strerror}" if err.errno is not None and err.strerror else str(err)
+    if err.filename is not None:
+        path = os.fsdecode(err.filename)
+        if err.errno == errno.EEXIST and not Path(path).is_dir():  # mkdir(exist_ok=True) on a file
+            reason += " and is not a folder"
+        if err.filename2 is not None:
+            path += f" -> {os.fsdecode(err.filename2)}"
+        return f"{path}: {reason}"
+    file = _open_file_of(err)
+    return f"cannot write {file.name}: {reason}" if file is not None else reason
+
+
 def main() -> None:
-    """Entry point: run the app, turning fusiontrack's errors into one clear line and exit code 2."""
+    """Entry point: run the app, turning fusiontrack's errors (and the OS's, writing the outputs) into one clear
+    line and exit code 2."""
     try:
         app()
     except FusiontrackError as err:
         if os.environ.get("FUSIONTRACK_DEBUG"):
             raise
         err_console.print(f"[bold red]error:[/] {escape(str(err))}", highlight=False, soft_wrap=True)
+        sys.exit(2)
+    except OSError as err:
+        if os.environ.get("FUSIONTRACK_DEBUG"):
+            raise
+        err_console.print(f"[bold red]error:[/] {escape(os_error_line(err))}", highlight=False, soft_wrap=True)
         sys.exit(2)
     except KeyboardInterrupt:
         err_console.print("interrupted")

@@ -152,8 +152,17 @@ class TransformTree:
         self._edges.setdefault(parent, {})[child] = inv
 
     def add_record(self, tf: Transform) -> None:
-        """Add a :class:`fusiontrack.types.Transform` (the pose of ``child_frame`` in ``parent_frame``)."""
-        T = make_transform(quat_to_matrix(tf.rotation_xyzw), tf.translation_m)
+        """Add a :class:`fusiontrack.types.Transform` (the pose of ``child_frame`` in ``parent_frame``); a
+        translation or quaternion that is not finite, or a zero quaternion, is a ConfigError naming the frames
+        (as :meth:`add`'s other refusals: callers reading a recording warn and leave the edge out)."""
+        q, t = np.asarray(tf.rotation_xyzw), np.asarray(tf.translation_m)
+        bad = [f"{name} ({', '.join(f'{v:.4g}' for v in value)}) is {what}" for name, value, what, ok in (
+            ("translation", t, "not finite", np.all(np.isfinite(t))),
+            ("rotation x, y, z, w", q, "not a finite non-zero quaternion", np.all(np.isfinite(q)) and np.any(q != 0)),
+        ) if not ok]
+        if bad:
+            raise ConfigError(f"transform {tf.child_frame!r} -> {tf.parent_frame!r}: its {' and its '.join(bad)}")
+        T = make_transform(quat_to_matrix(q), t)
         self.add(tf.parent_frame, tf.child_frame, T)
 
     @property

@@ -120,7 +120,10 @@ def _transform_tree(rec: Recording) -> TransformTree:
     for tf_topic in ("/tf_static", "/tf"):
         if tf_topic in topics:
             for tf in rec.messages([tf_topic]):
-                tree.add_record(tf)
+                try:
+                    tree.add_record(tf)
+                except ConfigError as err:  # a transform that cannot be used (NaN): left out, as road.py does
+                    log.warning("%s %s: %s", rec.paths[0], tf_topic, err)
     return tree
 
 

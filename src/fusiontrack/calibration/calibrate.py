@@ -116,9 +116,15 @@ def camera_info_from_recording(path: str | Path, camera: str, info_topic: str = 
                                                   if i.msgtype == "sensor_msgs/msg/CameraInfo"
                                                   and rec.sensor_of(t) == camera]
         info = next((m for m in rec.messages(wanted) if isinstance(m, CameraInfo)), None) if wanted else None
+    where = f" on {info_topic}" if info_topic else ""
     if info is None:
-        where = f" on {info_topic}" if info_topic else ""
         raise RecordingError(f"{path}: no CameraInfo of camera {camera!r}{where}")
+    K = np.asarray(info.K, dtype=np.float64)
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        fx, fy = (K[0, 0], K[1, 1]) if K.shape == (3, 3) else (np.nan, np.nan)
+        raise RecordingError(f"{path}: the CameraInfo of camera {camera!r}{where} holds no usable intrinsics (fx "
+                             f"{fx:g}, fy {fy:g}; an uncalibrated camera?): give the intrinsics (calibrate "
+                             "--intrinsics)")
     return info
 
 

@@ -67,6 +67,8 @@ class LazyFrames:
         self._cache: tuple[int, Image | None] | None = None  # (log time, converted image)
         self.converted = 0  # images converted so far
         self.seen = 0  # images passed so far
+        self.unreadable = 0  # images converted so far that could not be used (skipped)
+        self.first_unreadable = ""  # why the first of them could not
 
     @staticmethod
     def _stamp(data: bytes, t_log: int, ros1: bool) -> int:
@@ -118,10 +120,20 @@ class LazyFrames:
             if img is not None and img.encoding == "rgb8":
                 img = Image(img.t_ns, img.sensor, img.frame_id, img.pixels[..., ::-1], "bgr8")
         except Exception as err:  # one bad image must not end the run: the laser goes on alone
-            log.warning("%s: image at %d ns unreadable (%s); skipped", self.topic, t_log, err)
+            self.unreadable += 1  # counted, and said once at the end of the run (:meth:`warn_unreadable`)
+            self.first_unreadable = self.first_unreadable or f"image at {t_log} ns: {err}"
+            log.debug("%s: image at %d ns unreadable (%s); skipped", self.topic, t_log, err)
         self.converted += 1
         self._cache = (t_log, img)
         return img
+
+
+    def warn_unreadable(self) -> None:
+        """At the end of a run: one warning with the number of images skipped as unreadable (a truncated or empty
+        image, an unknown encoding), if any, and why the first was."""
+        if self.unreadable:
+            log.warning("%s: %d of the %d images converted were unreadable and skipped (first: %s)", self.topic,
+                        self.unreadable, self.converted, self.first_unreadable)
 
 
 def _is_ros1(conn: Any) -> bool:

@@ -1567,8 +1567,10 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
                 if timings is not None:
                     timings.setdefault("bias_s", []).append(bias.seconds)
         frames: Any = None
+        lazy: LazyFrames | None = None
         if camera is not None:
-            frames = LazyFrames(cam_rec, image_topic, round(p.max_frame_dt_s * 1e9), corrections.get(cam_sensor, 0))
+            frames = lazy = LazyFrames(cam_rec, image_topic, round(p.max_frame_dt_s * 1e9),
+                                       corrections.get(cam_sensor, 0))
             if frames_wrapper is not None:
                 frames = frames_wrapper(frames)
         auto_area = isinstance(area_m, str)
@@ -1581,6 +1583,8 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
                              clock_corrections_ns=laser_corrections)
         states, events = run_tracker(trk, detector, poses, stream, total=total, auto_area=auto_area,
                                      classify=classify, progress=progress, timings=timings)
+        if lazy is not None:
+            lazy.warn_unreadable()
     if bias is not None and len(bias.history):
         h = bias.history
         events.insert(0, Event(int(h.t_ns[0]), cam_sensor, "camera_bias", int(h.t_ns[-1]), attributes={

@@ -290,7 +290,11 @@ def read_inputs(path: str | Path, *, phones: tuple[str, ...] | None = None,
             [imu_topics[p] for p in wanted] + [f"/{c}/depth" for c in sorted(depth_topics)]
         for m in rec.messages(read):
             if isinstance(m, Transform):
-                tree.add_record(m)
+                try:
+                    tree.add_record(m)
+                except ConfigError as err:  # a transform that cannot be used (NaN): left out, with a warning
+                    log.warning("%s %s: %s", rec.paths[0], m.sensor, err)
+                    continue
                 poses.clear()
             elif isinstance(m, CameraInfo):
                 infos.setdefault(m.sensor, m)

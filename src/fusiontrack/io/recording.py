@@ -112,6 +112,28 @@ def _repair_hint(path: Path) -> str:
     return f'run "fusiontrack repair {path} -o {out}" to recover the messages it holds'
 
 
+def _storage_files(path: Path) -> set[Path]:
+    """The files a recording path reads, resolved: a file itself; a rosbag2 folder its .mcap / .db3 files (and the
+    folder)."""
+    path = path.resolve()
+    if not path.is_dir():
+        return {path}
+    return {path} | {f.resolve() for f in path.iterdir() if f.suffix in (".mcap", ".db3")}
+
+
+def _check_distinct(paths: Sequence[Path]) -> None:
+    """A recording given twice (the same path, the same file by another name, or a rosbag2 folder and a file in it)
+    would be merged with itself, every message twice: a RecordingError naming both."""
+    seen: dict[Path, Path] = {}
+    for path in paths:
+        files = _storage_files(path)
+        first = next((seen[f] for f in sorted(files) if f in seen), None)
+        if first is not None:
+            what = f"{path} is given twice" if str(first) == str(path) else f"{first} and {path} are one recording"
+            raise RecordingError(f"{what}: read together every message would count twice; give each recording once")
+        seen.update(dict.fromkeys(files, path))
+
+
 class Recording:
     """One or several recording files read as a single time-ordered stream.
 
@@ -144,6 +166,7 @@ class Recording:
         missing = [str(p) for p in self.paths if not p.exists()]
         if missing:
             raise RecordingError(f"recording not found: {', '.join(missing)}")
+        _check_distinct(self.paths)
         self._custom_fields = parse_definitions(custom_types or {})
         default_typestore = build_typestore(custom_types)
         self._readers: list[AnyReader] = []

@@ -130,6 +130,8 @@ def _image_array(msg: Any, dtype: np.dtype, channels: int, topic: str) -> np.nda
     dtype = np.dtype(dtype).newbyteorder(">" if msg.is_bigendian else "<")
     row_bytes = msg.width * channels * dtype.itemsize
     data = np.asarray(msg.data, dtype=np.uint8)
+    if msg.width == 0 or msg.height == 0:  # no pixels: as unusable as a truncated image
+        raise MessageTypeError(f"{topic}: image of {msg.width}x{msg.height} {msg.encoding} holds no pixels")
     if msg.step < row_bytes or data.size < msg.step * msg.height:
         raise MessageTypeError(
             f"{topic}: image of {msg.width}x{msg.height} {msg.encoding} needs {row_bytes} bytes per row and "

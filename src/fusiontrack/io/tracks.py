@@ -35,6 +35,7 @@ import json
 import logging
 import math
 from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
@@ -77,13 +78,21 @@ def _open_for_writing(path: Path) -> TextIO:
         raise RecordingError(f"{path}: cannot be written ({err.strerror or err})") from err
 
 
-def _open_for_reading(path: Path, what: str) -> TextIO:
+@contextmanager
+def _open_for_reading(path: Path, what: str) -> Iterator[TextIO]:
+    """``with _open_for_reading(path, what) as f``: the text file, its errors named as RecordingErrors: missing,
+    unreadable, or not UTF-8 text (a binary file given for a text one, found while its lines are read)."""
     try:
-        return path.open(encoding="utf-8-sig", newline="")  # (a spreadsheet's byte-order mark is not a column)
+        f = path.open(encoding="utf-8-sig", newline="")  # (a spreadsheet's byte-order mark is not a column)
     except FileNotFoundError as err:
         raise RecordingError(f"{path}: no such file (expected {what})") from err
     except OSError as err:
         raise RecordingError(f"{path}: cannot be read ({err.strerror or err}; expected {what})") from err
+    with f:
+        try:
+            yield f
+        except UnicodeDecodeError as err:
+            raise RecordingError(f"{path}: not a UTF-8 text file (expected {what})") from err
 
 
 def flatten_states(items: Iterable[TrackState | Track]) -> list[TrackState]:

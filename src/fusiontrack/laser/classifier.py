@@ -14,7 +14,7 @@ inside the package (``laser/models/object_classifier.json``). Two reasons not to
 a pickle is tied to the scikit-learn version that wrote it and runs code when loaded; and evaluating 100
 stumps is one vectorised comparison in numpy, ~50x cheaper than ``AdaBoostClassifier.predict``'s per-call
 overhead, which matters when the tracker classifies its targets on every scan.
-``fusiontrack train-classifier`` rebuilds the file (:func:`train_default`).
+``fusiontrack train-classifier --into-package`` rebuilds the file (:func:`train_default`).
 """
 
 from __future__ import annotations
@@ -222,7 +222,7 @@ class ObjectClassifier:
 
 @functools.cache
 def default_classifier() -> ObjectClassifier:
-    """The classifier shipped with the package (rebuilt by ``fusiontrack train-classifier``)."""
+    """The classifier shipped with the package (rebuilt by ``fusiontrack train-classifier --into-package``)."""
     ref = resources.files("fusiontrack.laser") / "models" / MODEL_FILE
     with resources.as_file(ref) as path:
         return ObjectClassifier.load(path)
