@@ -92,12 +92,80 @@ def test_a_jump_of_the_whole_stream_is_followed():
     assert not sync.dropped_ahead
 
 
-def test_an_unconfirmed_leap_at_the_end_is_dropped():
-    stream = [imu(t) for t in range(0, 1_000_000_000, 10_000_000)] + [imu(7_200_000_000_000)]
+def test_a_lone_leap_at_the_end_is_dropped_unless_the_stream_has_one_sensor():
+    """Nothing comes after a leap at the very end to confirm or refute it: one sensor's (a slow sensor after a
+    pause) goes through; a lone one in a stream of several sensors is a bad stamp."""
+    one = [imu(t) for t in range(0, 1_000_000_000, 10_000_000)] + [imu(7_200_000_000_000)]
     sync = Synchronizer()
-    out = list(sync(stream))
-    assert len(out) == len(stream) - 1
+    assert len(list(sync(one))) == len(one)
+    two = [imu(t, "ab"[k % 2]) for k, t in enumerate(range(0, 1_000_000_000, 10_000_000))] + [imu(7_200_000_000_000)]
+    sync = Synchronizer()
+    assert len(list(sync(two))) == len(two) - 1
     assert sync.dropped_ahead == {"imu": 1}
+
+
+H_NS = 3_600_000_000_000
+
+
+def _kept(stream: list[ImuSample], **kwargs: int) -> tuple[list[int], Synchronizer]:
+    sync = Synchronizer(window_ns=50_000_000, **kwargs)
+    out = [r.t_ns for r in sync(stream)]
+    assert out == sorted(out)
+    return out, sync
+
+
+def test_a_bad_stamp_on_the_first_message_does_not_set_the_clock():
+    ms = 1_000_000
+    good = [0, 40, 30, 80, 70, 120, 110, 160]  # 10 ms of disorder, within the window
+    out, sync = _kept([imu(H_NS)] + [imu(t * ms) for t in good])
+    assert out == sorted(t * ms for t in good)
+    assert sync.dropped_ahead == {"imu": 1}
+    assert not sync.dropped
+
+
+def test_unrelated_bad_stamps_in_a_row_are_not_a_jump():
+    """Three bad stamps in a row (1 h, 5 h, 9 h ahead) disagree with each other: no jump, all three dropped."""
+    ms = 1_000_000
+    stream = [imu(t * ms, "a") for t in range(0, 400, 40)] + [imu(H_NS, "a"), imu(5 * H_NS, "b"), imu(9 * H_NS, "a")]
+    stream += [imu(t * ms, s) for t in range(400, 2000, 40) for s in "ab"]
+    out, sync = _kept(stream)
+    assert len(out) == len(stream) - 3
+    assert sum(sync.dropped_ahead.values()) == 3
+
+
+def test_one_sensor_an_hour_ahead_is_dropped_not_followed():
+    """A sensor whose clock is an hour off (messages in bursts of three) is not the whole stream jumping: its
+    messages are dropped, counted (the warning suggests a clock offset), the others all go through."""
+    ms = 1_000_000
+    stream = [imu(t * ms, "a") for t in range(0, 400, 40)]
+    for t in range(400, 2000, 120):
+        stream += [imu(H_NS + (t + k) * ms, "cam") for k in range(3)]
+        stream += [imu((t + d) * ms, "a") for d in (0, 40, 80)]
+    out, sync = _kept(stream)
+    assert len(out) == sum(r.sensor == "a" for r in stream)
+    assert sync.dropped_ahead == {"cam": sum(r.sensor == "cam" for r in stream)}
+
+
+def test_a_pause_with_one_sensor_logged_a_little_late_loses_nothing():
+    """After a pause, sensor b's last message from before it arrives after a's first from after it (b is logged
+    30 ms late): the old clock goes on for a message, which must not refute the jump."""
+    ms = 1_000_000
+    stream = [imu(0, "a")]
+    for t in range(40, 1000, 40):
+        stream += [imu(t * ms, "a"), imu((t - 30) * ms, "b")]
+    for t in range(1000, 2000, 40):
+        stream += [imu(H_NS + t * ms, "a"), imu((t - 30) * ms if t == 1000 else H_NS + (t - 30) * ms, "b")]
+    out, sync = _kept(stream)
+    assert len(out) == len(stream)
+    assert not sync.dropped_ahead
+
+
+def test_a_slow_stream_is_not_taken_for_leaps():
+    """A sensor at 0.05 Hz alone (each message 20 s after the last: more than leap_ns) loses nothing."""
+    stream = [imu(k * 20_000_000_000, "gps") for k in range(11)]
+    out, sync = _kept(stream)
+    assert len(out) == 11
+    assert not sync.dropped_ahead
 
 
 def test_clock_offsets_put_sensors_on_one_clock():

@@ -59,20 +59,27 @@ class Synchronizer:
 
     leap_ns : int
         A message stamped more than ``max(leap_ns, window_ns)`` after the newest one so far is a *leap*.
-        It is held back; if the next ``leap_confirm - 1`` messages leap as well, the stream has jumped (a
-        paused recording, a restarted clock) and they are all let through; if a message at the old clock
-        comes first, the held ones were bad stamps and are dropped (counted in :attr:`dropped_ahead`).
-        Default 1 s.
+        It is held back. It is let through with the ones held beside it once ``leap_confirm`` leaps agree
+        (each after the first, at most ``leap_ns`` before it, and no farther from the one before than the first
+        was from the old clock: a stream slower than ``leap_ns`` goes on at its pace, a pause goes on at the
+        stream's rate, unrelated bad stamps do not) and, in a stream of several sensors, come from two of them: the whole
+        stream jumped (a paused recording, a restarted clock). ``leap_confirm`` messages at the old clock first
+        (which go on as usual meanwhile: a sensor logged a little late still sends a few), or a leap that
+        disagrees with the held ones, show them to be bad stamps: they are dropped (counted in
+        :attr:`dropped_ahead`). The first ``2 * leap_confirm - 1`` messages of the stream are judged against
+        their median time (more than ``leap_ns`` plus 5 median deviations after it is a bad stamp), so that a
+        bad stamp on the very first message cannot set the clock. Default 10 s.
     leap_confirm : int
-        Messages in a row that confirm a leap (default 3: a single bad stamp, or two, are dropped). A leap at
-        the end of the stream that nothing confirms is dropped.
+        Leaps that confirm a jump (default 3: one or two bad stamps are dropped). Leaps still held when
+        the stream ends harm nothing after them: they are let through if they agree with each other and are
+        more than one, or the stream has one sensor; a lone one in a stream of several is dropped.
 
     Iterate :meth:`__call__` over a stream; :attr:`dropped`, :attr:`dropped_ahead` and :attr:`reordered` count
     what happened.
     """
 
     def __init__(self, window_ns: int = 200_000_000, clock_corrections_ns: Mapping[str, int] | None = None, *,
-                 leap_ns: int = 1_000_000_000, leap_confirm: int = 3) -> None:
+                 leap_ns: int = 10_000_000_000, leap_confirm: int = 3) -> None:
         if isinstance(window_ns, bool) or not isinstance(window_ns, int | np.integer) or window_ns < 0:
             raise ConfigError(f"sync window_ns: expected a non-negative integer of nanoseconds, got {window_ns!r}")
         if isinstance(leap_ns, bool) or not isinstance(leap_ns, int | np.integer) or leap_ns <= 0:
@@ -90,7 +97,8 @@ class Synchronizer:
         self.dropped: Counter[str] = Counter()
         """Messages dropped because they came later than ``window_ns``, per sensor."""
         self.dropped_ahead: Counter[str] = Counter()
-        """Messages dropped because they were stamped far ahead of the stream and nothing followed them, per sensor."""
+        """Messages dropped because they were stamped far ahead of the stream (a leap the messages after it did not
+        confirm), per sensor."""
         self.reordered = 0
 
     def __call__(self, stream: Iterable[Any]) -> Iterator[Any]:
@@ -99,22 +107,52 @@ class Synchronizer:
         newest = None  # newest corrected time seen so far
         last_out = None  # time of the last message let out
         leaps: list[tuple[int, Any]] = []  # messages far ahead of ``newest``, held until confirmed or refuted
-        for record in stream:
-            offset = self.clock_corrections_ns.get(record.sensor, 0)
-            t = record.t_ns + offset
-            if offset:
-                record = with_time(record, t)
-            if newest is not None and t > newest + self.leap_ns:
+        sensors: set[str] = set()
+        leap = self.leap_ns
+
+        def corrected(records: Iterable[Any]) -> Iterator[tuple[int, Any]]:
+            for record in records:
+                offset = self.clock_corrections_ns.get(record.sensor, 0)
+                t = record.t_ns + offset
+                yield t, (with_time(record, t) if offset else record)
+
+        old_clock = 0  # messages at the old clock since the first leap held
+
+        def refute() -> None:
+            nonlocal old_clock
+            for _, bad in leaps:
+                self.dropped_ahead[bad.sensor] += 1
+            leaps.clear()
+            old_clock = 0
+
+        rest = corrected(stream)
+        first = list(itertools.islice(rest, 2 * self.leap_confirm - 1))  # judged against their median time
+        if first:
+            times = np.array([t for t, _ in first], np.float64)
+            median = float(np.median(times))
+            limit = median + leap + 5.0 * float(np.median(np.abs(times - median)))  # (a slow stream spreads them)
+            for _, bad in (m for m in first if m[0] > limit):
+                self.dropped_ahead[bad.sensor] += 1
+            first = [m for m in first if m[0] <= limit]
+        for t, record in itertools.chain(first, rest):
+            sensors.add(record.sensor)
+            if newest is not None and t > newest + leap:
+                # a leap that does not go on from the held ones at their pace disagrees: they were bad stamps
+                if leaps and not (leaps[0][0] - leap <= t <= leaps[-1][0] + max(leap, leaps[0][0] - newest)):
+                    refute()
                 leaps.append((t, record))
-                if len(leaps) < self.leap_confirm:
+                if len(leaps) < self.leap_confirm or (
+                        len(sensors) > 1 and len({r.sensor for _, r in leaps}) < 2
+                        and len(leaps) < 4 * self.leap_confirm):  # (other sensors may have died at the jump)
                     continue
-                accepted, leaps = leaps, []  # the stream jumped: let them all through
-            elif leaps:
-                for _, bad in leaps:  # a message at the old clock: the held ones were bad stamps
-                    self.dropped_ahead[bad.sensor] += 1
-                leaps = []
-                accepted = [(t, record)]
+                accepted = sorted(leaps, key=lambda m: m[0])  # the stream jumped: let them all through
+                leaps.clear()
+                old_clock = 0
             else:
+                if leaps:  # the old clock goes on: after leap_confirm such messages the held ones were bad stamps
+                    old_clock += 1
+                    if old_clock >= self.leap_confirm:
+                        refute()
                 accepted = [(t, record)]
             for t, record in accepted:
                 if last_out is not None and t < last_out:
@@ -127,8 +165,11 @@ class Synchronizer:
                 while heap and heap[0][0] <= newest - self.window_ns:
                     last_out, _, out = heapq.heappop(heap)
                     yield out
-        for _, bad in leaps:
-            self.dropped_ahead[bad.sensor] += 1
+        if leaps and (len(sensors) == 1 or len(leaps) > 1):  # (the held ones agree with each other)
+            for t, record in leaps:  # nothing comes after them: let through
+                heapq.heappush(heap, (t, next(counter), record))
+            leaps.clear()
+        refute()
         while heap:
             last_out, _, out = heapq.heappop(heap)
             yield out
