@@ -62,8 +62,8 @@ class Synchronizer:
         It is held back. It is let through with the ones held beside it once ``leap_confirm`` leaps agree
         (each after the first, at most ``leap_ns`` before it, and no farther from the one before than the first
         was from the old clock: a stream slower than ``leap_ns`` goes on at its pace, a pause goes on at the
-        stream's rate, unrelated bad stamps do not) and, in a stream of several sensors, come from two of them: the whole
-        stream jumped (a paused recording, a restarted clock). ``leap_confirm`` messages at the old clock first
+        stream's rate, unrelated bad stamps do not) and, in a stream of several sensors, come from two of them:
+        the whole stream jumped (a paused recording, a restarted clock). ``leap_confirm`` messages at the old clock first
         (which go on as usual meanwhile: a sensor logged a little late still sends a few), or a leap that
         disagrees with the held ones, show them to be bad stamps: they are dropped (counted in
         :attr:`dropped_ahead`). The first ``2 * leap_confirm - 1`` messages of the stream are judged against
