@@ -58,16 +58,16 @@ class Synchronizer:
         :func:`estimate_clock_offset` returns the correction itself).
 
     leap_ns : int
-        A message stamped more than ``max(leap_ns, window_ns)`` after the newest one so far is a *leap*.
-        It is held back. It is let through with the ones held beside it once ``leap_confirm`` leaps agree
-        (each after the first, at most ``leap_ns`` before it, and no farther from the one before than the first
-        was from the old clock: a stream slower than ``leap_ns`` goes on at its pace, a pause goes on at the
-        stream's rate, unrelated bad stamps do not) and, in a stream of several sensors, come from two of them:
-        the whole stream jumped (a paused recording, a restarted clock). ``leap_confirm`` messages at the old clock first
-        (which go on as usual meanwhile: a sensor logged a little late still sends a few), or a leap that
-        disagrees with the held ones, show them to be bad stamps: they are dropped (counted in
+        A message stamped more than ``max(leap_ns, window_ns)`` after the newest one so far is a *leap*. It is
+        held back, and let through with the others held once ``leap_confirm`` leaps agree: the whole stream
+        jumped (a paused recording, a restarted clock). They agree when each is at most ``leap_ns`` before the
+        first and no farther after the one before it than the first was from the old clock (a stream slower
+        than ``leap_ns`` goes on at its own pace; a pause goes on at the stream's rate; unrelated bad stamps do
+        not), and, in a stream of several sensors, when they come from two of them. Meanwhile messages at the
+        old clock go on as usual (a sensor logged a little late still sends a few); ``leap_confirm`` of them, or
+        a leap that disagrees, show the held ones to be bad stamps: they are dropped (counted in
         :attr:`dropped_ahead`). The first ``2 * leap_confirm - 1`` messages of the stream are judged against
-        their median time (more than ``leap_ns`` plus 5 median deviations after it is a bad stamp), so that a
+        their median time (more than ``leap_ns`` plus 5 median deviations after it: a bad stamp), so that a
         bad stamp on the very first message cannot set the clock. Default 10 s.
     leap_confirm : int
         Leaps that confirm a jump (default 3: one or two bad stamps are dropped). Leaps still held when
