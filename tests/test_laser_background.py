@@ -217,6 +217,24 @@ def test_new_geometry_before_initialisation_learns_from_scratch() -> None:
     assert bg.update(np.r_[np.full(11, 3.0), 1.0]).tolist() == [False] * 11 + [True]
 
 
+def test_a_geometry_met_before_anything_was_learnt_is_carried_over_once_something_is() -> None:
+    """Every 7th scan has only the first 100 beams, from the first scan on: the 100-beam model starts empty, and
+    must take the 720-beam background as soon as that one is learnt, not learn alone for 50 of its own scans."""
+    a, b = (720, -2.0, 0.005), (100, -2.0, 0.005)
+    bg = BeamBackground(720, n_init=50)
+    ranges = 5.0 + 0.5 * np.sin(np.arange(720) / 30.0)
+    first_b_after = None
+    for k in range(120):
+        g = b if k % 7 == 0 else a
+        bg.set_geometry(*g)
+        bg.update(ranges[: g[0]])
+        if g == b and first_b_after is None and k > 60:
+            first_b_after = k
+            assert bg.initialised
+            np.testing.assert_allclose(bg.background_m, ranges[:100], atol=1e-6)
+    assert first_b_after is not None
+
+
 def test_geometries_kept_are_bounded() -> None:
     bg = BeamBackground(10, n_init=1)
     bg.set_geometry(10, 0.0, 0.1)

@@ -427,6 +427,27 @@ def test_beam_count_change_keeps_the_scanner_detecting(caplog: pytest.LogCapture
     assert det.background("laser_a").resets == 0
 
 
+def test_priming_through_geometry_changes_gives_the_online_backgrounds() -> None:
+    """``prime`` promises the numbers online learning reaches: also when a scanner changes its beam count during
+    the priming (laser_a goes through 6 geometries, laser_b starts late so the priming runs on past them)."""
+    rng = np.random.default_rng(0)
+    beams = [N_BEAMS - 20 * g for g in range(6)]
+    scans = []
+    for i in range(60):
+        scans.append(_scan("laser_a", i * PERIOD_NS, None, rng, n_beams=N_BEAMS if i < 12 else beams[i % 6]))
+        if i >= 20:
+            scans.append(_scan("laser_b", i * PERIOD_NS, None, rng))
+    online, primed = _detector(n_init=10), _detector(n_init=10)
+    primed.prime(iter(scans))
+    for scan in scans:
+        online.update(scan)
+        primed.update(scan)
+    for name in POSES:
+        a, b = online.background(name), primed.background(name)
+        assert a.geometry == b.geometry
+        np.testing.assert_array_equal(a.background_m, b.background_m)
+
+
 def test_silent_scanner_stops_contributing_after_max_age() -> None:
     rng = np.random.default_rng(RNG_SEED)
     det = _detector(max_age_s=0.2)

@@ -162,10 +162,12 @@ class BeamBackground:
     Attributes
     ----------
     max_geometries : int
-        Scan geometries whose backgrounds are kept (:meth:`set_geometry`), 4.
+        Scan geometries whose backgrounds are kept (:meth:`set_geometry`), 8. (A scanner that goes through more
+        loses the oldest; a detector's priming then no longer gives exactly the numbers online learning would.)
     background_m : (n_beams,) float64
-        Current background (``NaN`` before initialisation, or for a beam that never had a return when
-        ``range_max_m`` is infinite). Read-only view.
+        Current background (``NaN`` before initialisation, for a beam that never had a return when
+        ``range_max_m`` is infinite, and for the beams of a new geometry outside the old one's field of view,
+        until their first valid reading). Read-only view, of the current geometry's model.
     """
 
     def __init__(self, n_beams: int, alpha: float = 0.005, beta: float = 0.05, tau_fg_m: float = 0.20,
@@ -192,7 +194,8 @@ class BeamBackground:
             raise ValueError(f"range_min_m, range_max_m: expected 0 <= range_min_m < range_max_m, "
                              f"got {range_min_m}, {range_max_m}")
         self.resets = 0
-        """How many times a change of beam count reset the model."""
+        """How many times the model started learning from nothing again: a scan of another beam count given to
+        :meth:`update`, or a new geometry met before anything was learnt (:meth:`set_geometry`)."""
         self.geometry: Geometry | None = None
         """The scan geometry the model is for, once :meth:`set_geometry` named it."""
         self._saved: dict[Geometry, tuple[int, np.ndarray, int, np.ndarray]] = {}
@@ -240,24 +243,35 @@ class BeamBackground:
             self._saved[old] = (self._n_beams, self._buffer, self._n_seen, self._bg)
         self.geometry = new
         if new in self._saved:
+            left = (self._bg, self.initialised)
             self._n_beams, self._buffer, self._n_seen, self._bg = self._saved.pop(new)
-            return "resumed"
+            if self.initialised or not left[1]:
+                return "resumed"
+            # first met before the one left was initialised: carried over from it now rather than learnt alone
+            self._resample(old, new, left[0])
+            return "resampled"
         while len(self._saved) > self.max_geometries - 1:
             self._saved.pop(next(iter(self._saved)))  # the oldest
         if old is not None and self.initialised:
-            a_old = old[1] + old[2] * np.arange(old[0])
-            a_new = new[1] + new[2] * np.arange(new[0])
-            j = np.rint((a_new - old[1]) / old[2]).astype(np.int64)
-            inside = (j >= 0) & (j < old[0])
-            j = j.clip(0, old[0] - 1)
-            inside &= np.abs(a_old[j] - a_new) <= 0.5 * max(abs(old[2]), abs(new[2])) + 1e-12
-            self._n_beams = new[0]
-            self._buffer = np.empty((0, new[0]), dtype=np.float32)
-            self._bg = np.where(inside, self._bg[j], np.nan)
+            self._resample(old, new, self._bg)
             return "resampled"
         self.resets += 1
         self.reset(new[0])
         return "new"
+
+    def _resample(self, old: Geometry, new: Geometry, bg: np.ndarray) -> None:
+        """Become the initialised model of geometry ``new`` whose beams take ``bg`` (of geometry ``old``) at the
+        nearest angle within half a beam, NaN (adopt the first valid reading) outside."""
+        a_old = old[1] + old[2] * np.arange(old[0])
+        a_new = new[1] + new[2] * np.arange(new[0])
+        j = np.rint((a_new - old[1]) / old[2]).astype(np.int64)
+        inside = (j >= 0) & (j < old[0])
+        j = j.clip(0, old[0] - 1)
+        inside &= np.abs(a_old[j] - a_new) <= 0.5 * max(abs(old[2]), abs(new[2])) + 1e-12
+        self._n_beams = new[0]
+        self._buffer = np.empty((0, new[0]), dtype=np.float32)
+        self._n_seen = self.n_init
+        self._bg = np.where(inside, bg[j], np.nan)
 
     def reset(self, n_beams: int) -> None:
         """Forget everything and start learning again for scans of ``n_beams`` beams."""
@@ -274,7 +288,8 @@ class BeamBackground:
 
     @property
     def initialised(self) -> bool:
-        """Whether ``n_init`` scans have been seen since construction or the last reset."""
+        """Whether the background is learnt: ``n_init`` scans seen since construction or the last reset, or carried
+        over from another geometry (:meth:`set_geometry`)."""
         return self._n_seen >= self.n_init
 
     @property
@@ -355,7 +370,7 @@ class BeamBackground:
         bg[adopt] = r[adopt]
         return fg
 
-    max_geometries = 4
+    max_geometries = 8
 
 
 def switch_geometry(background: BeamBackground, scan: Any, warned: set[tuple[str, Geometry]]) -> str:
