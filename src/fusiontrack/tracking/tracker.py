@@ -687,6 +687,7 @@ class _Merged:
     split_since: int = 0  # start of the current run of split conditions (0: none)
     split_last: int = 0  # last time the split condition held
     multi_last: int = 0  # last time its segments showed more than one person (>= 3 leg blobs, or 2 segments)
+    formed_ns: int = 0  # when it was made (a merge, a split leaving two or more together, a birth)
     # One-segment frames since multi_last whose leg blobs are not counted yet: (time, points), oldest first.
     # They are counted only when multi_last is old enough for the single-person rule (see _settle_multi).
     unchecked: list[tuple[int, np.ndarray]] = field(default_factory=list)
@@ -1360,7 +1361,7 @@ class LaserPeopleTracker:
         if births_due:
             ready = self._ready_births(t_ns, det, free, edge_d)
             if ready.size and n_m and p.split_birth_m > 0:
-                used = self._births_that_split(t_ns, det, free, ready, labels, assigned, dead_m, split_now)
+                used = self._births_that_split(t_ns, det, free, ready, labels, assigned, dead_m | apart, split_now)
 
         # ---- merges (B7 rule 1, B17): targets sharing one detection become one merged target
         groups = merge_groups if n_t else {}
@@ -1598,7 +1599,7 @@ class LaserPeopleTracker:
         centre = det.centres[j]
         r2 = p.merged_r_m**2
         out = _Merged(np.concatenate([centre, mvel.mean(axis=0)]), np.diag([r2, r2, 0.5**2, 0.5**2]), t_ns,
-                      mpos, mvel, info, multi_last=t_ns)
+                      mpos, mvel, info, multi_last=t_ns, formed_ns=t_ns)
         ids = tuple(sorted(out.ids))
         if self._held_splits.pop(frozenset(ids), None) is None:  # else: they had not really split
             self.events.append(Event(t_ns, p.sensor, "merge", t_ns, position_m=centre, track_ids=ids,
@@ -1642,7 +1643,7 @@ class LaserPeopleTracker:
                 r2 = p.merged_r_m**2
                 new_merged.append(_Merged(np.concatenate([det.centres[j], m.vel[ks].mean(axis=0)]),
                                           np.diag([r2, r2, 0.5**2, 0.5**2]), t_ns, m.pos[ks].copy(),
-                                          m.vel[ks].copy(), [m.info[k] for k in ks], multi_last=t_ns))
+                                          m.vel[ks].copy(), [m.info[k] for k in ks], multi_last=t_ns, formed_ns=t_ns))
         ids = tuple(sorted(m.ids))  # held back for split_hold_s: a merge of the same people undoes it
         self._held_splits[frozenset(ids)] = Event(t_ns, p.sensor, "split", t_ns, position_m=m.x[0:2].copy(),
                                                   track_ids=ids, attributes={"parts": tuple(sorted(parts)), **how})
@@ -1659,23 +1660,24 @@ class LaserPeopleTracker:
         return cd.ready(t_ns, self._frames_ns(p.n_confirm - 1), self._frames_ns(p.n_confirm_interior - 1))
 
     def _births_that_split(self, t_ns: int, det: DetectionArrays, free: np.ndarray, ready: np.ndarray,
-                           labels: np.ndarray, assigned: np.ndarray, dead_m: np.ndarray,
+                           labels: np.ndarray, assigned: np.ndarray, excluded: np.ndarray,
                            split_now: dict[int, np.ndarray]) -> np.ndarray:
-        """Confirmed candidates that are a member leaving a merged target [RECON]; each such target is put in
-        ``split_now`` with its own detection and the candidate's. Returns the candidates used so.
+        """Confirmed candidates that are a member leaving a merged target [RECON]; each such target (not
+        ``excluded``: dead, or seen apart this step) is put in ``split_now`` with its own detection and the
+        candidate's. Returns the candidates used so.
 
         A merged target of two people who came in side by side kept both members on one person once the other
         walked off: the one who left was out of its gate by the time the scanners saw them apart, was born again
         under a new id, and the merged target held a phantom member for seconds (its leg blobs flicker to three
         on one person, so the one-person rule did not end it). A candidate confirmed within ``split_birth_m`` of
-        a merged target's detection (at least ``split_min_m`` from it), and first seen within ``split_birth_m``
-        of where the merged target was then, is taken as that: the merged target splits onto the two
+        a merged target's detection (at least ``split_min_m`` from it), and first seen after the merged target was
+        made and within ``split_birth_m`` of where it was then, is taken as that: the merged target splits onto the two
         detections, identities by motion (or by appearance, with the fusion hook), as B7 rule 2's splits do."""
         p = self.params
         cd = self._cand
         n_w = self._id.size
         hosts = [i for i, m in enumerate(self._merged) if len(m.info) >= 2 and labels[n_w + i] == _MERGED
-                 and not dead_m[i] and i not in split_now and assigned[n_w + i] >= 0 and m.seen == t_ns]
+                 and not excluded[i] and i not in split_now and assigned[n_w + i] >= 0 and m.seen == t_ns]
         used = []
         for k in ready.tolist():
             if not hosts:
@@ -1685,6 +1687,8 @@ class LaserPeopleTracker:
             best, best_d = -1, math.inf
             for i in hosts:
                 m = self._merged[i]
+                if cd.first_t[k] < m.formed_ns:  # there before the merge: not one of its members
+                    continue
                 a = int(assigned[n_w + i])
                 d_now = float(np.hypot(*(det.centres[j] - det.centres[a])))
                 d_then = float(np.hypot(*(cd.first_pos[k] - (m.x[0:2] - m.x[2:4] * back_s))))
@@ -1782,7 +1786,7 @@ class LaserPeopleTracker:
                 for _ in range(n)]
         r2 = p.merged_r_m**2
         return _Merged(np.concatenate([det.centres[j], v0]), np.diag([r2, r2, 0.5**2, 0.5**2]), t_ns, pos,
-                       np.repeat(np.asarray(v0, float)[None], n, axis=0), info, multi_last=t_ns)
+                       np.repeat(np.asarray(v0, float)[None], n, axis=0), info, multi_last=t_ns, formed_ns=t_ns)
 
     # ---------------------------------------------------------------------------------------------
     def _track_velocity(self, pos: np.ndarray, dt: float) -> None:
