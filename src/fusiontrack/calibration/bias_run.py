@@ -128,8 +128,7 @@ def _transform_tree(rec: Recording) -> TransformTree:
 
 
 def _camera_info(rec: Recording, camera: str) -> CameraInfo | None:
-    topics = rec.topic_types()
-    infos = [t for t, m in topics.items() if m == "sensor_msgs/msg/CameraInfo" and rec.sensor_of(t) == camera]
+    infos = rec.camera_info_topics(camera)
     return next((m for m in rec.messages(infos[:1]) if isinstance(m, CameraInfo)), None) if infos else None
 
 

@@ -111,10 +111,7 @@ def camera_info_from_recording(path: str | Path, camera: str, info_topic: str = 
         The recording has none.
     """
     with Recording(path) as rec:
-        topics = rec.topics()
-        wanted = [info_topic] if info_topic else [t for t, i in topics.items()
-                                                  if i.msgtype == "sensor_msgs/msg/CameraInfo"
-                                                  and rec.sensor_of(t) == camera]
+        wanted = [info_topic] if info_topic else rec.camera_info_topics(camera)
         info = next((m for m in rec.messages(wanted) if isinstance(m, CameraInfo)), None) if wanted else None
     where = f" on {info_topic}" if info_topic else ""
     if info is None:

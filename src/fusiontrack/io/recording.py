@@ -50,6 +50,8 @@ SENSOR_MAP_KEY = "fusiontrack.sensors"
 TimeSource = Literal["header", "log"]
 LASERSCAN = "sensor_msgs/msg/LaserScan"
 IMAGE = "sensor_msgs/msg/Image"
+COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
+CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 
 
 @dataclass(frozen=True, slots=True)
@@ -234,6 +236,29 @@ class Recording:
 
     def sensor_of(self, topic: str) -> str:
         return self._sensor_map.get(topic, topic)
+
+    def camera_info_topics(self, camera: str) -> list[str]:
+        """The ``CameraInfo`` topics of a camera (its sensor name, or one of its image topics).
+
+        Those of the same sensor (fusiontrack's sensor metadata) if there are any; else, as ROS names them, the
+        ``camera_info`` beside the camera's image topics (``/ns/camera_info`` for ``/ns/image_raw`` or
+        ``/ns/image_raw/compressed``), the nearest namespace first. A recording made by other tools has no
+        sensor metadata: each topic is its own sensor, and only the names tie an image to its calibration.
+        """
+        types = self.topic_types()
+        infos = [t for t, m in types.items() if m == CAMERA_INFO and self.sensor_of(t) == camera]
+        if infos:
+            return infos
+        images = [t for t, m in types.items() if m in (IMAGE, COMPRESSED_IMAGE)
+                  and (t == camera or self.sensor_of(t) == camera)]
+        near = []
+        for t, m in types.items():
+            if m == CAMERA_INFO:
+                ns = t.rsplit("/", 1)[0]
+                depth = max((len(ns) for img in images if img.startswith(ns + "/")), default=-1)
+                if depth >= 0:
+                    near.append((-depth, t))
+        return [t for _, t in sorted(near)]
 
     @property
     def message_count(self) -> int:

@@ -206,9 +206,7 @@ def camera_from_recording(rec: Any, image_sensor: str, frame_id: str, *, info_to
     CameraInfo for the camera or no transform from it to ``world_frame``.
     """
     topics = rec.topic_types()
-    infos = [info_topic] if info_topic else [t for t, i in topics.items()
-                                             if i == "sensor_msgs/msg/CameraInfo"
-                                             and rec.sensor_of(t) == image_sensor]
+    infos = [info_topic] if info_topic else rec.camera_info_topics(image_sensor)
     info: CameraInfo | None = None
     if infos and infos[0] in topics:
         info = next((m for m in rec.messages(infos[:1]) if isinstance(m, CameraInfo)), None)

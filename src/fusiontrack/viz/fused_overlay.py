@@ -417,6 +417,10 @@ def _setup(rec: Recording, camera: str, image_topic: str | None, world_frame: st
             continue
         frame = next((f for f in (f"{name}_calibrated", name) if tree is not None and f in tree.frames
                       and world_frame in tree.frames and tree.has_path(f, world_frame)), None)
+        if frame is None and tree is not None:  # no sensor metadata (a recording made by other tools): its frame
+            fid = next((m.frame_id for m in rec.messages([scan_topics[name]])), "")
+            frame = next((f for f in (f"{fid}_calibrated", fid) if f and f in tree.frames
+                          and world_frame in tree.frames and tree.has_path(f, world_frame)), None)
         if frame is None:
             log.warning("%s: no transform from laser %r to %r: its points are not drawn", where, name, world_frame)
             continue
