@@ -39,18 +39,21 @@ def test_a_file_that_is_not_a_bag(tmp_path):
 
 
 def test_a_recording_given_twice_is_refused(tmp_path):
-    """The same recording twice (by the same path, another spelling of it, or a rosbag2 folder and its .mcap) would
-    be merged with itself; two different recordings still merge."""
+    """The same recording twice (by the same path, another spelling of it, a rosbag2 folder and its .mcap, or a
+    copy) would be merged with itself; two different recordings (the next piece of it) still merge."""
     scans = [LaserScan(i * 100_000_000, "laser", "laser", -1.0, 0.01, 0.02, 5.0, np.ones(21)) for i in range(1, 4)]
     write_recording(tmp_path / "rec", scans)
-    write_recording(tmp_path / "other", scans)
+    write_recording(tmp_path / "other", scans)  # a copy
+    write_recording(tmp_path / "next", [LaserScan(s.t_ns + 300_000_000, "laser", "laser", -1.0, 0.01, 0.02, 5.0,
+                                                  np.ones(21)) for s in scans])
     (mcap,) = (tmp_path / "rec").glob("*.mcap")
     for twice, message in (([tmp_path / "rec"] * 2, "rec is given twice"),
                            ([tmp_path / "rec", tmp_path / "other" / ".." / "rec"], "other/../rec are one recording"),
-                           ([tmp_path / "rec", mcap], f"{mcap.name} are one recording")):
+                           ([tmp_path / "rec", mcap], f"{mcap.name} are one recording"),
+                           ([tmp_path / "rec", tmp_path / "other"], "other hold the same messages")):
         with pytest.raises(RecordingError, match=message):
             Recording(twice)
-    with Recording([tmp_path / "rec", tmp_path / "other"]) as rec:
+    with Recording([tmp_path / "rec", tmp_path / "next"]) as rec:
         assert rec.message_count == 6
 
 

@@ -136,6 +136,22 @@ def _check_distinct(paths: Sequence[Path]) -> None:
         seen.update(dict.fromkeys(files, path))
 
 
+def _check_not_copies(paths: Sequence[Path], readers: Sequence[AnyReader]) -> None:
+    """Two inputs with the same span and the same messages per topic are copies of one recording (merged, every
+    message would count twice): a RecordingError naming both. Consecutive pieces, or the bags of two machines
+    recorded together, differ in one or the other."""
+    seen: dict[tuple[Any, ...], Path] = {}
+    for path, reader in zip(paths, readers, strict=True):
+        counts = tuple(sorted((c.topic, c.msgtype, c.msgcount) for c in reader.connections))
+        if not counts or not sum(n for _, _, n in counts):
+            continue
+        key = (reader.start_time, reader.end_time, counts)
+        if key in seen:
+            raise RecordingError(f"{seen[key]} and {path} hold the same messages (a copy?): read together every "
+                                 "message would count twice; give each recording once")
+        seen[key] = path
+
+
 class Recording:
     """One or several recording files read as a single time-ordered stream.
 
@@ -183,6 +199,7 @@ class Recording:
                 self._readers.append(reader)
                 self._register_custom(reader, path)
                 sensor_map.update(self._stored_sensor_map(reader))
+            _check_not_copies(self.paths, self._readers)
         except BaseException:
             self.close()
             raise
