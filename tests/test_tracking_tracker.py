@@ -781,3 +781,37 @@ def test_a_member_who_walks_off_unseen_is_split_off_not_born_again(split_birth_m
         assert len(pos) == 2
         assert np.hypot(*(pos[0] - a_pos[k])) < 0.3
         assert np.hypot(*(pos[1] - b_pos[k])) < 0.3
+
+
+def test_members_of_a_merged_target_stay_with_it_when_two_scanners_scan_a_millisecond_apart() -> None:
+    """Two walkers close side by side (0.25 m: their members are pushed apart to ``member_min_gap_m`` at each
+    correction) are one segment for 3 s, seen by two scanners whose scans come 1 ms apart (steps of 1 ms and
+    39 ms). The members' alpha-beta velocity gain was beta / dt: at each 1 ms step a push of centimetres became
+    metres per second, and the members flew off (tens of metres in the simulated crowds). Their velocities must
+    stay with the merged target's, and the members on the walkers."""
+    rng = np.random.default_rng(11)
+    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 14.0, 10.0), rng=0)
+    n = 4 * 25
+    a_pos, a_feet = _walk(n, np.array([2.0, 4.0]), np.zeros(n), 1.2, 1.3)
+    b_pos, b_feet = _walk(n, np.array([2.0, 4.25]), np.zeros(n), 1.2, 1.3, phase0=1.0)
+    worst = worst_v = 0.0
+    for k in range(n):
+        for offset_ns in (0, 1_000_000):  # scanner a, then scanner b a millisecond later
+            t_ns = k * FRAME_NS + offset_ns
+            if k < 25:
+                dets = [_detection(t_ns, a_feet[k], rng), _detection(t_ns, b_feet[k], rng)]
+            else:  # one segment at their middle
+                feet = np.concatenate([a_feet[k], b_feet[k]])
+                dets = [Detection(t_ns, "laser", position_m=0.5 * (a_pos[k] + b_pos[k]) + rng.normal(0, 0.01, 2),
+                                  features={"feet_m": 0.5 * (a_feet[k] + b_feet[k]),
+                                            "inter_feet_m": np.asarray(0.2), "one_foot": np.asarray(False),
+                                            "points_m": _leg_points(feet, rng)})]
+            states = trk.step(t_ns, dets)
+            if k >= 30:
+                assert {s.situation for s in states} == {Situation.MERGED}, k
+                (m,) = trk._merged
+                worst_v = max(worst_v, float(np.abs(m.vel - m.x[2:4]).max()))
+                for s in states:
+                    worst = max(worst, min(np.hypot(*(s.position_m - a_pos[k])), np.hypot(*(s.position_m - b_pos[k]))))
+    assert worst < 0.5
+    assert worst_v < 0.3  # m/s from the merged target's velocity (1.4 with beta / dt)
