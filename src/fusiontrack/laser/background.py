@@ -398,7 +398,7 @@ def all_initialised(states: Any) -> bool:
 
 
 def keep_primed_backgrounds(states: Any) -> None:
-    """End a priming pass over scanner states (``background``, ``geometry``, ``primed_ns``, ``t_ns``): an initialised
+    """End a priming pass over scanner states (``background``, ``primed_ns``, ``t_ns``): an initialised
     background is kept and marked learnt up to its last scan (``primed_ns``: the tracking pass classifies scans up
     to then without learning from them again); one not initialised is dropped, to be learnt online from the first
     scan. The scan times are forgotten either way."""
@@ -406,5 +406,5 @@ def keep_primed_backgrounds(states: Any) -> None:
         if st.background is not None and st.background.initialised:
             st.primed_ns = st.t_ns
         else:
-            st.background, st.geometry, st.primed_ns = None, None, None
+            st.background, st.primed_ns = None, None
         st.t_ns = None

@@ -92,14 +92,12 @@ def planar_pose(laser2world: Any, name: str = "laser2world") -> tuple[np.ndarray
 class _Scanner:
     """Mutable per-scanner state (the detector's, not shared)."""
 
-    __slots__ = ("background", "cluster", "geometry", "points_m", "primed_ns", "rigid", "rotation", "t_ns",
-                 "translation")
+    __slots__ = ("background", "cluster", "points_m", "primed_ns", "rigid", "rotation", "t_ns", "translation")
 
     def __init__(self, rotation: np.ndarray, translation: np.ndarray) -> None:
         self.rotation = rotation
         self.translation = translation
         self.background: BeamBackground | None = None
-        self.geometry: tuple[int, float, float] | None = None
         self.t_ns: int | None = None
         self.points_m = np.zeros((0, 2))
         self.rigid = np.zeros(0, np.int64)  # rigid cluster of each point in this scan, -1 for none
@@ -306,7 +304,6 @@ class LaserPeopleDetector:
             log.debug("laser %s: dropped a scan at %d ns, older than the last one (%d ns)", scan.sensor,
                       scan.t_ns, st.t_ns)
             return
-        geometry = (scan.n_beams, scan.angle_min_rad, scan.angle_increment_rad)
         if not (math.isfinite(scan.angle_min_rad) and math.isfinite(scan.angle_increment_rad)
                 and scan.angle_increment_rad != 0):
             self.dropped_scans[scan.sensor] += 1
@@ -322,7 +319,6 @@ class LaserPeopleDetector:
             st.background = BeamBackground(max(scan.n_beams, 1), **self._bg_args, range_min_m=r_min,
                                            range_max_m=r_max)
         switch_geometry(st.background, scan, self._geometries_warned)
-        st.geometry = geometry
         last_ns, st.t_ns = st.t_ns, scan.t_ns
         r = scan.valid_ranges_m()
         if st.primed_ns is not None and scan.t_ns <= st.primed_ns:  # already learnt from: classify only

@@ -835,13 +835,12 @@ def road_roi(roads: Any, margin_m: float = 3.0) -> RoadROI | None:
 
 
 class _Laser:
-    """Mutable per-scanner state: background, scan geometry, tracks (the detector's, not shared)."""
+    """Mutable per-scanner state: background, tracks (the detector's, not shared)."""
 
     __slots__ = (
         "P",
         "background",
         "dims",
-        "geometry",
         "heading",
         "hits",
         "ids",
@@ -859,7 +858,6 @@ class _Laser:
         self.rotation = rotation
         self.translation = translation
         self.background: BeamBackground | None = None
-        self.geometry: tuple[int, float, float] | None = None
         self.t_ns: int | None = None
         self.primed_ns: int | None = None  # scans up to this time taught the background already (prime)
         self.x = np.zeros((0, 4))
@@ -1104,14 +1102,12 @@ class LaserVehicleDetector:
 
     def _background_of(self, st: _Laser, scan: LaserScan) -> None:
         """The laser's background, made at its first scan and switched with the scan geometry (kept per geometry)."""
-        geometry = (scan.n_beams, scan.angle_min_rad, scan.angle_increment_rad)
         if st.background is None:
             r_min = scan.range_min_m if math.isfinite(scan.range_min_m) and scan.range_min_m > 0 else 0.0
             r_max = scan.range_max_m if scan.range_max_m > r_min else math.inf
             st.background = BeamBackground(max(scan.n_beams, 1), **self._bg_args, range_min_m=r_min,
                                            range_max_m=r_max)
         switch_geometry(st.background, scan, self._geometries_warned)
-        st.geometry = geometry
 
     def __call__(self, scan: LaserScan) -> list[Detection]:
         """Process one scan; the detections of its vehicles (road frame), ``[]`` while the background learns.
