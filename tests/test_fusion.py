@@ -350,10 +350,11 @@ class _Frames:
 ROWS_Y = (-0.7, 0.0, 0.7)  # three people standing 6 m in front of the camera, 0.7 m apart (< d_contact_m)
 
 
-def _three_people(laser: _FakeLaser, bank: _FakeBank, frames: _Frames, check_frames: int = 1) -> FusionTracker:
-    """A fusion tracker whose laser tracker and classifiers are the fakes."""
+def _three_people(laser: _FakeLaser, bank: _FakeBank, frames: _Frames, check_frames: int = 1,
+                  **params: Any) -> FusionTracker:
+    """A fusion tracker whose laser tracker and classifiers are the fakes (``params``: more FusionParams)."""
     cam = PinholeCamera.from_pose([0.0, 0.0, 3.0], 0.0, np.radians(15), fx=400, fy=400, width=640, height=480)
-    trk = FusionTracker(cam, frames, FusionParams(check_frames=check_frames, max_overlap=1.0))
+    trk = FusionTracker(cam, frames, FusionParams(check_frames=check_frames, max_overlap=1.0, **params))
     trk.laser, trk.bank = laser, bank
     boxes = trk._boxes(np.array([[6.0, y] for y in ROWS_Y]))
     assert np.isfinite(boxes).all()
@@ -437,7 +438,8 @@ def test_classifier_trained_after_the_contact_does_not_vote_in_its_check():
     laser = _FakeLaser()
     bank = _FakeBank({1: 1, 2: 1, 3: 2}, {1})
     t = 1_000_000_000
-    trk = _three_people(laser, bank, _Frames({t + 40_000_000, t + 80_000_000}), check_frames=2)
+    # check_voters 1: one classifier may exchange (by default both must have voted; see the test after the next)
+    trk = _three_people(laser, bank, _Frames({t + 40_000_000, t + 80_000_000}), check_frames=2, check_voters=1)
     trk._check_identities(t, _step_states(trk, t))  # the contact: no image yet
     assert trk._checks[(1, 2)].voters == {1}
     bank.trained.add(2)  # 2 learns (from its own track's box, row 1) while the check waits
@@ -455,7 +457,7 @@ def test_after_an_exchange_the_pair_is_checked_again_by_the_same_voters_only():
     laser = _FakeLaser()
     bank = _FakeBank({1: 1, 2: 1, 3: 2}, {1})
     t = 1_000_000_000
-    trk = _three_people(laser, bank, _Frames())
+    trk = _three_people(laser, bank, _Frames(), check_voters=1)
     trk._check_identities(t, _step_states(trk, t))
     assert laser.ids == [2, 1, 3]
     assert trk.stats.exchanges == 1
@@ -467,6 +469,51 @@ def test_after_an_exchange_the_pair_is_checked_again_by_the_same_voters_only():
     assert laser.ids == [2, 1, 3]
     assert trk.stats.exchanges == 1
     assert trk.stats.checks >= 4  # decided again ("keep") at each new image of the contact
+
+
+@pytest.mark.parametrize(("check_voters", "exchanged"), [(2, False), (1, True)])
+def test_one_classifier_alone_keeps_identities_but_does_not_exchange_them(check_voters, exchanged):
+    """Only 1 had a classifier at the contact, and it finds its track on the other person's box. By default
+    (``check_voters`` 2) the check decides "keep" without exchanging (``stats.withheld``): one classifier
+    trained on two people side by side is too often sure of the wrong one. With 1 it exchanges them."""
+    laser = _FakeLaser()
+    bank = _FakeBank({1: 1, 3: 2}, {1})
+    trk = _three_people(laser, bank, _Frames(), check_voters=check_voters)
+    t = 1_000_000_000
+    for k in range(3):
+        trk._check_identities(t + k * 40_000_000, _step_states(trk, t + k * 40_000_000))
+    assert trk.stats.checks >= 1
+    assert (laser.ids == [2, 1, 3]) == exchanged
+    assert bool(trk.relabels) == exchanged
+    assert (trk.stats.withheld >= 1) == (not exchanged)
+
+
+def test_an_exchange_is_dated_at_the_closest_approach_of_the_two_tracks():
+    """Two tracks close in (0.75 m -> 0.2 m at step 5), drift apart again, and the laser splits them (a merge and a
+    split event) at step 8; only then does the camera see them, and both classifiers find their tracks on each
+    other's person. The relabel must reach back to step 5, where the tracks most likely took each other's
+    person (they can follow the wrong person well before the split), and end at the decision."""
+    from fusiontrack.types import Event, TrackState
+
+    laser = _FakeLaser()
+    laser.ids = [1, 2]
+    bank = _FakeBank({1: 1, 2: 0}, {1, 2})
+    dt = 40_000_000
+    t0 = 1_000_000_000
+    seen = {t0 + k * dt for k in range(9, 15)}  # the camera sees the pair from step 9 on
+    trk = _three_people(laser, bank, _Frames(seen), check_frames=2)
+    gaps = [0.75, 0.7, 0.6, 0.5, 0.35, 0.2, 0.3, 0.45, 0.6, 0.7, 0.7, 0.7, 0.7, 0.7, 0.7]
+    for k, gap in enumerate(gaps):
+        t = t0 + k * dt
+        ys = (ROWS_Y[1] - gap, ROWS_Y[1])  # 2 stays on row 1; 1 ends on row 0
+        trk.events = ([Event(t, "laser", "merge", t, track_ids=(1, 2))] if k == 6 else
+                      [Event(t, "laser", "split", t, track_ids=(1, 2))] if k == 8 else [])
+        trk._check_identities(t, [TrackState(t, "laser", tid, np.array([6.0, y]), np.zeros(2))
+                                  for tid, y in zip(laser.ids, ys, strict=True)])
+    (r,) = trk.relabels
+    assert laser.ids == [2, 1]
+    assert r.from_ns == t0 + 5 * dt
+    assert r.to_ns == t0 + 10 * dt  # decided on the second image (check_frames 2)
 
 
 @pytest.mark.parametrize(("check_visible", "exchanged"), [(0.5, False), (0.0, True)])

@@ -31,11 +31,16 @@
    are walking targets with boxes clear of every other box, each classifier of the pair that was trained at the
    contact (its *voters*; one trained later may have learnt the other person) compares its own track's box with
    the other one. When the mean evidence over ``check_frames`` images or more passes ``check_margin``, the
-   identities are confirmed or exchanged: the laser tracker's two ids are swapped from then on (at most one
-   exchange per track and step: another check of the same track waits for the next image), and
-   :attr:`FusionTracker.relabels` records the exchange back to where it most likely happened (the pair's last
-   split, else its closest approach); :func:`track_fused` applies it to the states already
-   returned (:func:`relabel_states`, like B17's re-linking of the merged interval);
+   identities are confirmed or exchanged (an exchange needs both tracks' classifiers, ``check_voters``): the
+   laser tracker's two ids are swapped from then on (at most one exchange per track and step: another check of
+   the same track waits for the next image), and
+   :attr:`FusionTracker.relabels` records the exchange back to where it most likely happened, the two tracks'
+   closest approach since the check opened [RECON: the tracks of two people walking side by side drift over to
+   each other's person while they are close, merged or not, often well before the laser's split; dated at the
+   pair's last split, as first written, the relabel left that stretch exchanged: on 72 simulated runs (crowd and
+   groups, seeds 0-35, 30 s, particle-filter draws 0 and 1) 11 exchanges, 42 ID switches in their runs, 22 dated
+   at the closest approach]; :func:`track_fused` applies it to the states already returned
+   (:func:`relabel_states`, like B17's re-linking of the merged interval);
 4. **learning** [B15] — a noncorrelated target with another target within ``d_train_m`` (1.5 m) learns from
    the camera image nearest in time: positives from its projected box (B11), negatives from the boxes of
    its ``L`` closest targets (patches centred in another box are dropped); at most once every
@@ -188,6 +193,12 @@ class FusionParams:
         fitted at once on one image, often of the two people side by side; on 72 simulated runs (crowd and
         groups, seeds 0-35, 30 s) all 7 exchanges voted by such a classifier were wrong or unclear, and
         requiring 2 updates took the fused ID switches of those runs from 70 to 60 (no other run changes)].
+    check_voters : int
+        A check exchanges the pair's identities only if at least this many of its two tracks' classifiers voted
+        (were trained when it opened); otherwise its decision is to keep them [RECON: one classifier alone,
+        trained on the two people side by side, is too often sure of the wrong one. On 72 simulated runs (crowd
+        and groups, seeds 0-35, 30 s) and the particle filters' draws 0 and 1, all 3 exchanges voted by one
+        classifier were wrong (ID switches 2 -> 0, 7 -> 5, 5 -> 3 without them), all 8 voted by two right].
     max_overlap : float
         An image is clear for a check when neither box of the pair has more than this fraction of its area
         inside another target's box (occlusion) [RECON].
@@ -254,6 +265,7 @@ class FusionParams:
     check_frames: int = 3
     check_s: float = 4.0
     check_min_updates: int = 2
+    check_voters: int = 2
     max_overlap: float = 0.3
     check_visible: float = 0.5
     reid: bool = True
@@ -278,6 +290,9 @@ class FusionParams:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ConfigError(f"FusionParams.{name}: expected an integer >= 1, got {v!r}")
+        if self.check_voters not in (1, 2) or isinstance(self.check_voters, bool):
+            raise ConfigError(f"FusionParams.check_voters: expected 1 or 2 (a check has two tracks), got "
+                              f"{self.check_voters!r}")
         if not 0 < self.max_overlap <= 1:
             raise ConfigError(f"FusionParams.max_overlap: expected a fraction in (0, 1], got {self.max_overlap!r}")
         if not (isinstance(self.check_visible, int | float) and 0 <= self.check_visible <= 1):
@@ -459,7 +474,8 @@ class FusionStats:
     overrides: int = 0  # splits where appearance gave another assignment than motion
     checks: int = 0  # identity checks decided
     exchanges: int = 0  # ... that exchanged the identities of a pair
-    withheld: int = 0  # ... that found them exchanged but kept them: a voter's classifier too new (check_min_updates)
+    withheld: int = 0  # ... that found them exchanged but kept them: one voter (check_voters), or a classifier too new
+    # (check_min_updates)
     reid_claims: int = 0  # new tracks born near a recently lost one (re-identification candidates)
     reids: int = 0  # ... given the lost identity
     camera_s: float = 0.0  # time spent on the camera side (reading, learning, scoring)
@@ -521,11 +537,10 @@ def _assigned_min(scores: np.ndarray) -> float:
 class _Check:
     """A pair of tracks that came into contact: their identities wait for the camera's evidence."""
 
-    swap_from_ns: int  # where an exchange would have begun: their last split, else their closest approach
+    swap_from_ns: int  # where an exchange would have begun: the two tracks' closest approach since the check opened
     closest_m: float
     near_ns: int  # last step the two were within d_train_m
     voters: frozenset[int]  # the ids whose classifiers were trained at the contact: only they give evidence
-    split_seen: bool = False
     evidence: float = 0.0  # summed per-classifier evidence for the current identities
     n: int = 0
     image_ns: int = -1  # the last image that gave evidence
@@ -1108,8 +1123,9 @@ class FusionTracker:
         image (``check_visible``), each of the two classifiers that was trained when the check opened (its
         voters; a check without any is reopened at the next contact) gives its evidence, its confidence on its
         own track's box minus that on the other box. After ``check_frames`` images, a mean evidence beyond
-        ``± check_margin`` keeps the identities or exchanges them (:meth:`_exchange`; only if every voter's
-        classifier has been updated ``check_min_updates`` times, else it keeps them: ``stats.withheld``); the
+        ``± check_margin`` keeps the identities or exchanges them (:meth:`_exchange`; only if both classifiers
+        voted (``check_voters``) and each has been updated ``check_min_updates`` times, else it keeps them:
+        ``stats.withheld``); the
         decided check waits for the pair's next contact (the next step, while they stay close) and is then run
         again by the same voters
         (a classifier first trained during the contact may have learnt the other person), until the pair has been
@@ -1126,17 +1142,17 @@ class FusionTracker:
         checks = self._checks
         # contacts: close pairs (row-major, as the checks are then opened and scored), and the members of this
         # step's merges and splits
-        contacts: dict[tuple[int, int], bool] = {}
+        contacts: dict[tuple[int, int], None] = {}  # (a dict: in the order found)
         for i, j in zip(*(k.tolist() for k in np.nonzero(d < p.d_contact_m)), strict=True):
             if i < j:
                 a, b = ids[i], ids[j]
-                contacts[(a, b) if a < b else (b, a)] = False
+                contacts[(a, b) if a < b else (b, a)] = None
         for e in self.events:
             if e.kind in ("merge", "split"):
                 for a, b in itertools.combinations(sorted(e.track_ids), 2):
                     if a in row and b in row:
-                        contacts[(a, b)] = contacts.get((a, b), False) or e.kind == "split"
-        for pair, split in contacts.items():
+                        contacts[(a, b)] = None
+        for pair in contacts:
             dist = float(d[row[pair[0]], row[pair[1]]])
             c = checks.get(pair)
             if c is None or not c.voters:
@@ -1144,18 +1160,15 @@ class FusionTracker:
                 # A check without voters is (re)opened at each contact until one of the two has a classifier.
                 # (a classifier that learnt alone, ``learn_all_s``, never saw a person near its own: no voter)
                 voters = frozenset(tid for tid in pair if self.bank.is_trained(tid) and tid not in self._alone)
-                checks[pair] = _Check(t_ns, dist, t_ns, voters, split or (c is not None and c.split_seen))
+                checks[pair] = _Check(t_ns, dist, t_ns, voters)
                 continue
             if c.decided:  # a decided pair still or again in contact: checked again, by the same voters (a
                 # classifier first trained during the contact, e.g. of a track born beside the other, may have
                 # learnt the other person under its id); new voters only once the check is dropped (check_s apart)
-                checks[pair] = _Check(t_ns, dist, c.near_ns, c.voters, split, exchanged=c.exchanged)
+                checks[pair] = _Check(t_ns, dist, c.near_ns, c.voters, exchanged=c.exchanged)
                 continue
-            if split:  # an exchange, if any, most likely happened at the (last) split
-                c.swap_from_ns, c.split_seen = t_ns, True
-            elif dist < c.closest_m and not c.split_seen:
-                c.swap_from_ns = t_ns
-            c.closest_m = min(c.closest_m, dist)
+            if dist < c.closest_m:  # an exchange, if any, most likely happened where the two tracks came closest
+                c.swap_from_ns, c.closest_m = t_ns, dist
         for pair in list(checks):
             a, b = pair
             if a not in row or b not in row:  # one of them has ended: nothing to check
@@ -1217,10 +1230,12 @@ class FusionTracker:
         return states
 
     def _reliable(self, voters: Iterable[int]) -> bool:
-        """Whether the classifiers of ``voters`` may exchange identities: each has been updated at least
-        ``check_min_updates`` times."""
+        """Whether the classifiers of ``voters`` may exchange identities: there are ``check_voters`` of them, and
+        each has been updated at least ``check_min_updates`` times."""
+        voters = list(voters)
         k = self.params.check_min_updates
-        return all(self.bank.classifier(tid).n_updates >= k for tid in voters)
+        return (len(voters) >= self.params.check_voters
+                and all(self.bank.classifier(tid).n_updates >= k for tid in voters))
 
     def _exchange(self, a: int, b: int, from_ns: int, t_ns: int, evidence: float) -> bool:
         """The laser tracks ``a`` and ``b`` follow each other's person: exchange their ids from now on and
