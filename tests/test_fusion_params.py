@@ -34,6 +34,8 @@ def test_nested_appearance_options_reach_the_classifiers():
     ({"check_margin": -1.0}, "check_margin"),
     ({"check_margin": "high"}, "check_margin"),
     ({"check_frames": 0}, "check_frames"),
+    ({"check_voters": 3}, "check_voters"),  # a check has two tracks
+    ({"check_voters": True}, "check_voters"),
     ({"reid_min": 2.0}, "reid_min"),
     ({"appearance": 3}, "appearance"),
     ({"appearance": {"patches": {"size_px": 7}}}, "size_px"),
