@@ -41,7 +41,12 @@ not change from one repeat to the next): a burst of load from another job then i
 Identity figures swing from run to run: on the same 30 s scenes one change to the fused tracker often turns a few
 ID switches up in one run and down in another, and 24 paired runs have pointed the wrong way (score maps: 54 ID
 switches against 50 without over crowd + groups seeds 0-11). The trackers' own random draws (``--rng``, the
-particle filters' seed; default 0) move even the 72-run totals (crowd + groups, seeds 0-35, 30 s). Since the laser
+particle filters' seed; default 0) move even the 72-run totals (crowd + groups, seeds 0-35, 30 s). Since the
+identity checks date an exchange at the tracks' closest approach and need both classifiers to exchange
+(``FusionParams.check_voters``), over rng 0-3: fusion crowd 64 / 81 / 65 / 78 and groups 21 / 20 / 35 / 28 ID
+switches, groups IDF1 0.970 / 0.974 / 0.961 / 0.968; with the checks off 65 / 81 / 64 / 79 and 21 / 26 / 31 / 30,
+IDF1 0.966 / 0.961 / 0.953 / 0.960; as the checks were before, 66 / 83 / 67 / 78 and 31 / 32 / 39 / 32, IDF1
+0.966 / 0.973 / 0.959 / 0.967 (laser-only, rng 0 / 1: crowd 66 / 82, groups 21 / 26). Since the laser
 tracker splits a merged target seen apart (score maps then off by default): fusion 172 / 185 ID switches with
 rng 0 / 1, laser-only 169 / 184 (with the maps: 210 / 201). Before: fusion 242 / 218 / 252 / 245 with rng 0-3,
 laser-only 262 / 239 / 247 / 259; and one scene alone, groups seed 0, scored laser-only IDF1 0.78 to 0.99 over

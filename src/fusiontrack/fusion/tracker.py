@@ -198,7 +198,8 @@ class FusionParams:
         (were trained when it opened); otherwise its decision is to keep them [RECON: one classifier alone,
         trained on the two people side by side, is too often sure of the wrong one. On 72 simulated runs (crowd
         and groups, seeds 0-35, 30 s) and the particle filters' draws 0 and 1, all 3 exchanges voted by one
-        classifier were wrong (ID switches 2 -> 0, 7 -> 5, 5 -> 3 without them), all 8 voted by two right].
+        classifier were wrong (their runs' ID switches 2 -> 0, 7 -> 5, 5 -> 3 without them); of the 9 voted by
+        two, 7 were right, and one wrong one was undone by the pair's next check].
     max_overlap : float
         An image is clear for a check when neither box of the pair has more than this fraction of its area
         inside another target's box (occlusion) [RECON].
