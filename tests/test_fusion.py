@@ -239,7 +239,8 @@ def test_identity_check_undoes_an_exchange_the_laser_made_at_a_split(pair, monke
     motion decision); the camera's identity check must exchange them back: the exchange is dated between the
     laser's mistake and the decision, and from the decision on the output follows each person with the track it
     had before the merge (at every true split after it; the two walk side by side, so clear images are few and
-    the check may decide only after another laser split, to which its relabel then reaches back)."""
+    the check may decide only after another laser split; its relabel reaches back to the two tracks' closest
+    approach since the check (re)opened, which may lie before that split)."""
     from fusiontrack.tracking.tracker import LaserPeopleTracker
 
     orig = LaserPeopleTracker.step
@@ -394,6 +395,30 @@ def test_two_exchanges_sharing_a_track_in_one_step_return_the_laser_trackers_ids
     final = relabel_states(raw, [dataclasses.replace(r, from_ns=t, to_ns=t + 1) for r in trk.relabels])
     assert [s.track_id for s in final] == laser.ids
     assert [(r.a, r.b) for r in trk.relabels] == laser.calls
+
+
+def test_an_exchange_redates_the_other_checks_of_its_tracks():
+    """Checks (1, 2) and (2, 3) are open (no image yet). Exchanging 1 and 2 makes id 2 name the other track, so
+    the approaches check (2, 3) measured so far were another track's: an exchange it decides later must not reach
+    back before this one. Its dating starts again (the pair's next contact); the exchanged pair's own check and
+    the others are left alone."""
+    laser = _FakeLaser()
+    bank = _FakeBank({1: 0, 2: 1, 3: 2}, {1, 2, 3})
+    t = 1_000_000_000
+    trk = _three_people(laser, bank, _Frames(set()))
+    trk._check_identities(t, _step_states(trk, t))  # rows 0.7 m apart: (1, 2) and (2, 3) in contact
+    assert set(trk._checks) == {(1, 2), (2, 3)}
+    assert all(c.swap_from_ns == t and c.closest_m == pytest.approx(0.7) for c in trk._checks.values())
+    t2 = t + 40_000_000
+    assert trk._exchange(1, 2, t, t2, -1.0)
+    assert (trk._checks[(2, 3)].swap_from_ns, trk._checks[(2, 3)].closest_m) == (t2, math.inf)
+    assert (trk._checks[(1, 2)].swap_from_ns, trk._checks[(1, 2)].closest_m) == (t, pytest.approx(0.7))
+    t3 = t2 + 40_000_000  # 2 (now on row 0) and 3 (row 2) meet again, 0.5 m apart
+    from fusiontrack.types import TrackState
+
+    ys = {2: -0.25, 1: 0.7, 3: 0.25}
+    trk._check_identities(t3, [TrackState(t3, "laser", tid, np.array([6.0, ys[tid]]), np.zeros(2)) for tid in ys])
+    assert (trk._checks[(2, 3)].swap_from_ns, trk._checks[(2, 3)].closest_m) == (t3, pytest.approx(0.5))
 
 
 def test_classifiers_fitted_once_keep_identities_but_do_not_exchange_them():

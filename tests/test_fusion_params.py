@@ -36,6 +36,7 @@ def test_nested_appearance_options_reach_the_classifiers():
     ({"check_frames": 0}, "check_frames"),
     ({"check_voters": 3}, "check_voters"),  # a check has two tracks
     ({"check_voters": True}, "check_voters"),
+    ({"check_voters": 2.0}, "check_voters"),  # an integer, as check_min_updates
     ({"reid_min": 2.0}, "reid_min"),
     ({"appearance": 3}, "appearance"),
     ({"appearance": {"patches": {"size_px": 7}}}, "size_px"),

@@ -31,16 +31,17 @@
    are walking targets with boxes clear of every other box, each classifier of the pair that was trained at the
    contact (its *voters*; one trained later may have learnt the other person) compares its own track's box with
    the other one. When the mean evidence over ``check_frames`` images or more passes ``check_margin``, the
-   identities are confirmed or exchanged (an exchange needs both tracks' classifiers, ``check_voters``): the
+   identities are confirmed or exchanged (an exchange needs, by default, both tracks' classifiers:
+   ``check_voters``): the
    laser tracker's two ids are swapped from then on (at most one exchange per track and step: another check of
    the same track waits for the next image), and
    :attr:`FusionTracker.relabels` records the exchange back to where it most likely happened, the two tracks'
    closest approach since the check opened [RECON: the tracks of two people walking side by side drift over to
    each other's person while they are close, merged or not, often well before the laser's split; dated at the
    pair's last split, as first written, the relabel left that stretch exchanged: on 72 simulated runs (crowd and
-   groups, seeds 0-35, 30 s, particle-filter draws 0 and 1) 11 exchanges, 42 ID switches in their runs, 22 dated
-   at the closest approach]; :func:`track_fused` applies it to the states already returned
-   (:func:`relabel_states`, like B17's re-linking of the merged interval);
+   groups, seeds 0-35, 30 s, particle-filter draws 0 and 1) the 11 runs with an exchange had 42 ID switches with
+   it dated at the last split, 22 at the closest approach]; :func:`track_fused` applies it to the states already
+   returned (:func:`relabel_states`, like B17's re-linking of the merged interval);
 4. **learning** [B15] — a noncorrelated target with another target within ``d_train_m`` (1.5 m) learns from
    the camera image nearest in time: positives from its projected box (B11), negatives from the boxes of
    its ``L`` closest targets (patches centred in another box are dropped); at most once every
@@ -291,7 +292,8 @@ class FusionParams:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ConfigError(f"FusionParams.{name}: expected an integer >= 1, got {v!r}")
-        if self.check_voters not in (1, 2) or isinstance(self.check_voters, bool):
+        v = self.check_voters
+        if isinstance(v, bool) or not isinstance(v, int) or v not in (1, 2):
             raise ConfigError(f"FusionParams.check_voters: expected 1 or 2 (a check has two tracks), got "
                               f"{self.check_voters!r}")
         if not 0 < self.max_overlap <= 1:
@@ -1124,16 +1126,14 @@ class FusionTracker:
         image (``check_visible``), each of the two classifiers that was trained when the check opened (its
         voters; a check without any is reopened at the next contact) gives its evidence, its confidence on its
         own track's box minus that on the other box. After ``check_frames`` images, a mean evidence beyond
-        ``± check_margin`` keeps the identities or exchanges them (:meth:`_exchange`; only if both classifiers
-        voted (``check_voters``) and each has been updated ``check_min_updates`` times, else it keeps them:
-        ``stats.withheld``); the
-        decided check waits for the pair's next contact (the next step, while they stay close) and is then run
-        again by the same voters
-        (a classifier first trained during the contact may have learnt the other person), until the pair has been
-        apart for ``check_s``. A track is exchanged at most once per step
-        (a later check of it waits for the next image: its evidence was reset and this step's boxes carry the old
-        ids); the states of this step are returned with the exchanges applied one after the other, as the laser
-        tracker's ids were.
+        ``± check_margin`` keeps the identities or exchanges them (:meth:`_exchange`; only if ``check_voters``
+        classifiers (by default both) gave evidence on the deciding image and each has been updated
+        ``check_min_updates`` times, else it keeps them: ``stats.withheld``); the decided check waits for the
+        pair's next contact (the next step, while they stay close) and is then run again by the same voters (a
+        classifier first trained during the contact may have learnt the other person), until the pair has been
+        apart for ``check_s``. A track is exchanged at most once per step (a later check of it waits for the next
+        image: its evidence was reset and this step's boxes carry the old ids); the states of this step are
+        returned with the exchanges applied one after the other, as the laser tracker's ids were.
         """
         p = self.params
         ids = [int(st.track_id) for st in states]
@@ -1231,7 +1231,7 @@ class FusionTracker:
         return states
 
     def _reliable(self, voters: Iterable[int]) -> bool:
-        """Whether the classifiers of ``voters`` may exchange identities: there are ``check_voters`` of them, and
+        """Whether the classifiers of ``voters`` may exchange identities: there are at least ``check_voters``, and
         each has been updated at least ``check_min_updates`` times."""
         voters = list(voters)
         k = self.params.check_min_updates
@@ -1247,6 +1247,9 @@ class FusionTracker:
         for pair, c in self._checks.items():  # evidence gathered under the old ids no longer holds
             if a in pair or b in pair:
                 c.evidence, c.n = 0.0, 0
+                if pair != (a, b) and pair != (b, a):  # nor the approaches of the other track it now names: an
+                    # exchange of this pair later is dated from here on (the next contact's distances)
+                    c.swap_from_ns, c.closest_m = t_ns, math.inf
         for tid in (a, b):  # a claim's summed scores would mix two people
             self._claims.pop(tid, None)
         self.relabels.append(Relabel(int(from_ns), int(t_ns), int(a), int(b)))
