@@ -31,17 +31,15 @@
    are walking targets with boxes clear of every other box, each classifier of the pair that was trained at the
    contact (its *voters*; one trained later may have learnt the other person) compares its own track's box with
    the other one. When the mean evidence over ``check_frames`` images or more passes ``check_margin``, the
-   identities are confirmed or exchanged (an exchange needs, by default, both tracks' classifiers:
-   ``check_voters``): the
-   laser tracker's two ids are swapped from then on (at most one exchange per track and step: another check of
-   the same track waits for the next image), and
-   :attr:`FusionTracker.relabels` records the exchange back to where it most likely happened, the two tracks'
-   closest approach since the check opened [RECON: the tracks of two people walking side by side drift over to
-   each other's person while they are close, merged or not, often well before the laser's split; dated at the
-   pair's last split, as first written, the relabel left that stretch exchanged: on 72 simulated runs (crowd and
-   groups, seeds 0-35, 30 s, particle-filter draws 0 and 1) the 11 runs with an exchange had 42 ID switches with
-   it dated at the last split, 22 at the closest approach]; :func:`track_fused` applies it to the states already
-   returned (:func:`relabel_states`, like B17's re-linking of the merged interval);
+   identities are confirmed or exchanged (an exchange needs, by default, both tracks' classifiers: ``check_voters``):
+   the laser tracker's two ids are swapped from then on (at most one exchange per track and step: another check of
+   the same track waits for the next image), and :attr:`FusionTracker.relabels` records the exchange back to where it
+   most likely happened, the two tracks' closest approach since the check opened [RECON: the tracks of two people
+   walking side by side drift over to each other's person while they are close, merged or not, often well before the
+   laser's split; dated at the pair's last split, as first written, the relabel left that stretch exchanged: on 72
+   simulated runs (crowd and groups, seeds 0-35, 30 s, particle-filter draws 0 and 1) the 11 runs with an exchange
+   had 42 ID switches with it dated at the last split, 22 at the closest approach]; :func:`track_fused` applies it to
+   the states already returned (:func:`relabel_states`, like B17's re-linking of the merged interval);
 4. **learning** [B15] — a noncorrelated target with another target within ``d_train_m`` (1.5 m) learns from
    the camera image nearest in time: positives from its projected box (B11), negatives from the boxes of
    its ``L`` closest targets (patches centred in another box are dropped); at most once every
