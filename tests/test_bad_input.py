@@ -424,3 +424,16 @@ def test_view_makes_its_output_folder_but_not_for_a_bad_suffix(shared_data, tmp_
     assert bad.returncode == 2
     assert "v.gif: suffix '.gif' is not a video format" in bad.stderr
     assert not (tmp_path / "other").exists()
+
+
+@pytest.mark.parametrize(("option", "value"), [("--fps", "-5"), ("--fps", "0"), ("--fps", "nan"),
+                                               ("--max-frames", "-3"), ("--max-frames", "0")])
+def test_view_refuses_a_bad_frame_rate_or_frame_count(shared_data, tmp_path, option, value):
+    """view --fps -5 wrote a 1 fps video and --max-frames -3 one frame, both saying nothing: now an error naming the
+    option, and no video nor folder is made."""
+    out = tmp_path / "new" / "v.mp4"
+    result = _cli("view", str(shared_data / DEMO), "-o", str(out), option, value)
+    assert result.returncode == 2
+    assert option in result.stderr
+    assert "Traceback" not in result.stderr
+    assert not (tmp_path / "new").exists()

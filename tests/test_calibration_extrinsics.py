@@ -247,6 +247,11 @@ def test_calibration_edges_name_the_problem(scene, tmp_path):
         calibrate_from_points(pipeline, "laser_0", csv, intrinsics=(K, DIST))
     with pytest.raises(ConfigError, match="reference 'laser_9'"):
         calibrate_from_points(pipeline, "camera_0", csv, reference="laser_9", intrinsics=(K, DIST))
+    unposed = tmp_path / "unposed.toml"  # a reference laser without a pose would sit at the origin unsaid
+    unposed.write_text(PIPELINE.replace("pose = { x = -9.6, y = -7.1, z = 0.2, yaw_deg = 37.0 }\n", ""),
+                       encoding="utf-8")
+    with pytest.raises(ConfigError, match="reference 'laser_0' has no pose in the pipeline file"):
+        calibrate_from_points(unposed, "camera_0", csv, reference="laser_0", intrinsics=(K, DIST))
     with pytest.raises(ConfigError, match="pipeline file not found"):
         write_pose_to_pipeline(tmp_path / "none.toml", "camera_0", Pose())
     new = write_pose_to_pipeline(tmp_path / "new.toml", "camera_0", Pose(z=3.0), kind="camera", topic="/c",

@@ -96,3 +96,60 @@ def test_calibrate_from_recording_writes_the_corrected_pose(crowd, tmp_path):
     assert math.degrees(report.bias.bias_rad) == pytest.approx(BIAS_DEG, abs=0.2)
     with pytest.raises(RecordingError, match="laser"):
         calibrate_from_recording(pipeline, "camera_0", crowd["path"], lasers=["laser_9"], write=False)
+
+
+def _pipeline_without_poses(crowd) -> str:
+    sc = crowd["scenario"].config
+    lines = ["[pipeline]", 'name = "hall"', ""]
+    for laser in sc.lasers:
+        lines += [f"[sensors.{laser.name}]", 'kind = "laser"', f'topic = "/{laser.name}/scan"',
+                  f"clock_offset_ms = {laser.clock_offset_ms}", ""]
+    return "\n".join([*lines, "[sensors.camera_0]", 'kind = "camera"', 'topic = "/camera_0/image"', ""])
+
+
+def test_calibrate_from_recording_starts_from_the_recordings_poses_when_the_file_gives_none(crowd, tmp_path):
+    """A pipeline file listing the sensors without poses: the bias is learnt from the recording's /tf_static
+    poses (as the pipelines read them), not from sensors at the world's origin."""
+    pipeline = tmp_path / "pipeline.toml"
+    pipeline.write_text(_pipeline_without_poses(crowd), encoding="utf-8")
+    report = calibrate_from_recording(pipeline, "camera_0", crowd["path"], params=BiasParams(rho=0.5))
+    got = load_config(pipeline).sensors["camera_0"].pose
+    true = camera_pose_from_cam2world(crowd["true"].cam2world)
+    calibrated = camera_pose_from_cam2world(crowd["calibrated"].cam2world)  # the recording's (3 degrees off)
+    assert report.previous.model_dump() == pytest.approx(calibrated.model_dump(), abs=1e-6)
+    assert got.yaw_deg == pytest.approx(true.yaw_deg, abs=0.2)
+    assert (got.x, got.y, got.z, got.pitch_deg) == pytest.approx((true.x, true.y, true.z, true.pitch_deg), abs=1e-5)
+    assert math.degrees(report.bias.bias_rad) == pytest.approx(BIAS_DEG, abs=0.2)
+
+
+def test_the_people_pipeline_poses_its_camera_as_the_pipeline_file_says(crowd, tmp_path):
+    """``camera_poses`` (a pipeline file's camera pose, e.g. as ``fusiontrack calibrate`` wrote it) replaces the
+    recording's /tf_static pose: the camera moved 100 m aside sees nobody, so no classifier learns; posed as the
+    recording has it, the same run learns."""
+    from fusiontrack.calibration import cam2world_from_camera_pose
+    from fusiontrack.fusion import track_fused
+
+    sc = crowd["scenario"]
+    corr = {c.name: -round(c.clock_offset_ms * 1e6) for c in [*sc.config.lasers, *sc.config.cameras]}
+    bounds = Simulation(sc).world.bounds_m
+    calibrated = camera_pose_from_cam2world(crowd["calibrated"].cam2world)
+    away = calibrated.model_copy(update={"x": calibrated.x + 100.0})  # the hall is 90-110 m to its left
+    pipeline = tmp_path / "pipeline.toml"
+    pipeline.write_text(_pipeline_without_poses(crowd).replace(
+        'topic = "/camera_0/image"', f'topic = "/camera_0/image"\npose = {{ x = {away.x}, y = {away.y}, '
+        f'z = {away.z}, pitch_deg = {away.pitch_deg}, yaw_deg = {away.yaw_deg} }}'), encoding="utf-8")
+    poses = load_config(pipeline).camera_poses()
+    assert set(poses) == {"camera_0", "/camera_0/image"}
+    np.testing.assert_allclose(poses["camera_0"], cam2world_from_camera_pose(away), atol=1e-9)
+    runs = {}
+    for name, given in (("away", poses), ("recording", None),
+                        ("file, as the recording", {"camera_0": cam2world_from_camera_pose(calibrated)})):
+        _, _, stats = track_fused(crowd["path"], adaptive_bias=False, area_m=bounds, clock_corrections_ns=corr,
+                                  camera_poses=given)
+        runs[name] = stats
+    assert runs["away"].camera == "camera_0"  # a usable camera ...
+    assert runs["away"].train_updates == runs["away"].frames_used == 0  # ... that sees nobody: no image is read
+    assert runs["recording"].train_updates > 0
+    same, rec = runs["file, as the recording"], runs["recording"]
+    assert (same.train_updates, same.frames_used, same.train_frames) == (rec.train_updates, rec.frames_used,
+                                                                         rec.train_frames)

@@ -337,9 +337,15 @@ def view(
     One frame per camera image (or per laser scan when there is no camera); sensor poses come from
     the recording's tf_static, so a simulated recording is drawn in the world frame.
     """
+    import math
+
     from .io.video import VIDEO_WRITE_SUFFIXES, check_video_output
     from .viz.preview import render_preview
 
+    if max_frames is not None and max_frames < 1:  # (said before any folder is made for the video)
+        raise ConfigError(f"--max-frames: expected a number of frames >= 1, got {max_frames}")
+    if fps is not None and not (math.isfinite(fps) and fps > 0):
+        raise ConfigError(f"--fps: expected a positive frame rate, got {fps}")
     if not output.parent.exists():
         if output.suffix.lower() not in VIDEO_WRITE_SUFFIXES:
             check_video_output(output)  # a bad suffix is said first, before a folder is made for it
@@ -567,7 +573,7 @@ def track(
                 topics=topics, time_source=time_source, clock_corrections_ns=cfg.clock_corrections_ns(),
                 detector_params=cfg.laser or None, rng=seed, area_m=area_m, timings=timings,
                 adaptive_bias=camera_bias, progress=lambda f: bar.update(task, completed=f),
-                laser_poses=cfg.laser_poses(), sync_window_ns=cfg.sync.window_ns)
+                laser_poses=cfg.laser_poses(), sync_window_ns=cfg.sync.window_ns, camera_poses=cfg.camera_poses())
             if not fstats.camera:
                 console.print("[yellow]no usable camera: people tracked with the lasers only[/yellow]")
             elif fstats.bias is not None:

@@ -118,6 +118,18 @@ class PipelineConfig(_Model):
         return {s.topic: s.pose.matrix() for s in self.sensors.values()
                 if s.kind == SensorKind.LASER and "pose" in s.model_fields_set}
 
+    def camera_poses(self) -> dict[str, np.ndarray]:
+        """cam2world ``(4, 4)`` of the optical frame of the cameras whose table gives a ``pose`` (as ``fusiontrack
+        calibrate`` writes it), keyed by their topic and by their name: they override the recording's
+        ``/tf_static`` (the people pipeline's ``camera_poses``)."""
+        from .calibration.extrinsics import cam2world_from_camera_pose
+
+        out = {}
+        for name, s in self.sensors.items():
+            if s.kind in (SensorKind.CAMERA, SensorKind.RGBD) and "pose" in s.model_fields_set:
+                out[s.topic] = out[name] = cam2world_from_camera_pose(s.pose)
+        return out
+
     def topics(self) -> dict[str, str]:
         """topic -> sensor name, for :class:`fusiontrack.io.Recording`'s ``sensors`` argument."""
         out = {}

@@ -63,7 +63,8 @@ class CalibrationReport:
     pose : Pose
         The same as written in the pipeline file.
     previous : Pose
-        The camera's pose in the pipeline file before.
+        The camera's pose in the pipeline file before (``--adaptive`` from a file without one: the pose it
+        started from, the recording's).
     pnp : PnPResult or None
         Control-point fit (residuals, inliers, covariance).
     bias : BiasRun or None
@@ -141,6 +142,9 @@ def _reference2world(cfg: PipelineConfig, reference: str, source: str) -> np.nda
     if sensor is None:
         raise ConfigError(f"{source}: reference {reference!r} is neither 'world' nor a sensor; sensors: "
                           f"{sorted(cfg.sensors)}")
+    if "pose" not in sensor.model_fields_set:  # Pose() would silently put it at the origin
+        raise ConfigError(f"{source}: reference {reference!r} has no pose in the pipeline file: give its "
+                          f"[sensors.{reference}] a pose, or measure the points in the world frame")
     return sensor.pose.matrix()
 
 
@@ -224,7 +228,8 @@ def calibrate_from_recording(pipeline: str | Path, camera: str, recording: str |
         Lasers to use (default: every laser of the pipeline file present in the recording).
     params : BiasParams, optional
     poses_from : {"pipeline", "recording"}
-        Start from the poses in the pipeline file, or from the recording's ``/tf_static``.
+        Start from the poses in the pipeline file (a sensor whose table gives no ``pose``: its pose in the
+        recording's ``/tf_static``, as the pipelines do), or from the recording's ``/tf_static`` for all.
     write : bool
         Rewrite the camera's pose in the pipeline file.
 
@@ -245,9 +250,11 @@ def calibrate_from_recording(pipeline: str | Path, camera: str, recording: str |
     laser_names = [n for n, s in cfg.sensors.items() if s.kind == SensorKind.LASER]
     wanted = list(lasers) if lasers is not None else laser_names or None
     cam2world = laser2world = None
-    if poses_from == "pipeline":
-        cam2world = cam2world_from_camera_pose(previous)
-        laser2world = {n: cfg.sensors[n].pose.matrix() for n in (wanted or []) if n in cfg.sensors}
+    if poses_from == "pipeline":  # the poses the file gives; the others from /tf_static (not the origin)
+        if "pose" in cfg.sensors[camera].model_fields_set:
+            cam2world = cam2world_from_camera_pose(previous)
+        laser2world = {n: cfg.sensors[n].pose.matrix() for n in (wanted or [])
+                       if n in cfg.sensors and "pose" in cfg.sensors[n].model_fields_set}
     offsets = {n: s.clock_offset_ms for n, s in cfg.sensors.items() if s.clock_offset_ms}
     run = bias_from_recording(recording, camera, wanted, params, clock_offsets_ms=offsets, cam2world=cam2world,
                               laser2world=laser2world)
@@ -256,5 +263,7 @@ def calibrate_from_recording(pipeline: str | Path, camera: str, recording: str |
                                "unknown (are people walking in view of both sensors?)")
     comment = (f"fusiontrack calibrate --adaptive: yaw corrected by {math.degrees(run.bias_rad):+.3f} deg over "
                f"{int(np.count_nonzero(run.history.n_used))} frames")
+    if cam2world is None:  # the pose it started from: the recording's
+        previous = camera_pose_from_cam2world(run.camera.cam2world)
     return _finish(pipeline, camera, "adaptive-bias", run.corrected_camera.cam2world, previous, write, comment,
                    bias=run)

@@ -1016,15 +1016,21 @@ class FusionTracker:
         p = self.params
         if self.frames.nearest_time(t_ns) is None:
             return  # no image now (camera blackout, or between frames): the laser goes on alone
-        t0 = time.perf_counter()
-        img = self._image(t_ns)
-        if img is None:
+        if self.camera is None:
             return
+        t0 = time.perf_counter()
         boxes = self._boxes(pos)
         ok = np.isfinite(boxes).all(axis=1)
-        learners = [k for k in learners if ok[k]]
+        # a learner whose box is not (enough) in the image gives the bank no patch: it does not learn, its state is
+        # not confirmed by the camera, and the image is not read for it
+        seen = box_visibility(boxes, (self.camera.height, self.camera.width)) >= max(
+            self.bank.params.patches.min_visible, 1e-12)
+        learners = [k for k in learners if seen[k]]
         if not learners:
             self.stats.camera_s += time.perf_counter() - t0
+            return
+        img = self._image(t_ns)
+        if img is None:
             return
         # the learners, their confusers (within d_train), and whoever's box overlaps theirs (occluders)
         lb = boxes[learners]
@@ -1472,7 +1478,7 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
                 world_frame: str = "world", timings: dict[str, list[float]] | None = None,
                 classify: bool = True, frames_wrapper: Callable[[Any], FrameSource] | None = None,
                 background: str = "prime", laser_poses: Mapping[str, Any] | None = None,
-                sync_window_ns: int = 200_000_000,
+                sync_window_ns: int = 200_000_000, camera_poses: Mapping[str, Any] | None = None,
                 ) -> tuple[list[TrackState], list[Event], FusionStats]:
     """Track the people of a recording with its laser scans and one camera (seed 001's fused pipeline).
 
@@ -1499,6 +1505,10 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         As for ``track_recording``; ``clock_corrections_ns`` may also name the camera.
     laser_poses, sync_window_ns
         As for ``track_recording``.
+    camera_poses : mapping, optional
+        Image topic or camera sensor name -> ``cam2world`` ``(4, 4)`` of the camera's optical frame (a pipeline
+        file's poses, e.g. as ``fusiontrack calibrate`` wrote them: :meth:`~fusiontrack.config.PipelineConfig.
+        camera_poses`): the camera's pose, instead of the recording's ``/tf_static`` (``camera`` given: unused).
     background : ``"prime"`` or ``"learn"``
         As for ``track_recording``: the laser backgrounds learnt first from the recording's first scans (default),
         or online only; the bias pass's own laser backgrounds likewise (:func:`learn_camera_bias`).
@@ -1556,9 +1566,15 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         if image_topic is None:
             log.warning("%s: no camera image topic: the people pipeline tracks with the lasers only", path)
         elif camera is None:
+            poses = dict(camera_poses or {})
+            cam2world = poses.get(image_topic, poses.get(cam_sensor))
+            if poses and cam2world is None:
+                log.warning("%s: the camera poses given (%s) are not of camera %r (%s): its pose is read from "
+                            "/tf_static", path, ", ".join(sorted(poses)), cam_sensor, image_topic)
             first = next((m for m in rec.messages([image_topic]) if isinstance(m, Image)), None)
             if first is not None:
-                camera = camera_from_recording(rec, cam_sensor, first.frame_id, world_frame=world_frame)
+                camera = camera_from_recording(rec, cam_sensor, first.frame_id, world_frame=world_frame,
+                                               cam2world=cam2world)
             if camera is None:
                 log.warning("%s: %s for camera %r: the people pipeline tracks with the lasers only", path,
                             "no readable image" if first is None else "no CameraInfo or no /tf_static pose",

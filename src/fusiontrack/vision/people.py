@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError, RecordingError
-from ..geometry import PinholeCamera, TransformTree
+from ..geometry import PinholeCamera, TransformTree, invert_transform
 from ..io.tracks import MotBoxes, read_mot
 from ..tracking import kalman
 from ..tracking.association import hungarian
@@ -197,13 +197,14 @@ def complete_person_boxes(camera: PinholeCamera, boxes_px: Any, height_m: float 
 
 
 def camera_from_recording(rec: Any, image_sensor: str, frame_id: str, *, info_topic: str | None = None,
-                          world_frame: str = "world") -> PinholeCamera | None:
+                          world_frame: str = "world", cam2world: Any = None) -> PinholeCamera | None:
     """The calibrated camera of an image topic: its ``CameraInfo`` and its pose from ``/tf_static``.
 
     The pose is that of ``<frame_id>_calibrated`` when the transform tree has it (the calibration the
     simulator writes beside the true pose, which the user is not supposed to know), else of ``frame_id``,
-    else of ``image_sensor``. Returns ``None`` (floor positions unavailable) when the recording has no
-    CameraInfo for the camera or no transform from it to ``world_frame``.
+    else of ``image_sensor``; ``cam2world`` (``(4, 4)``, the optical frame's pose in ``world_frame``, e.g. a
+    pipeline file's, :meth:`fusiontrack.config.PipelineConfig.camera_poses`) overrides it. Returns ``None``
+    (floor positions unavailable) when the recording has no CameraInfo for the camera or no pose for it.
     """
     topics = rec.topic_types()
     infos = [info_topic] if info_topic else rec.camera_info_topics(image_sensor)
@@ -213,6 +214,8 @@ def camera_from_recording(rec: Any, image_sensor: str, frame_id: str, *, info_to
     if info is None:
         log.info("%s: no CameraInfo for camera %r: no floor positions", rec.paths[0], image_sensor)
         return None
+    if cam2world is not None:
+        return PinholeCamera.from_camera_info(info, invert_transform(np.asarray(cam2world, np.float64)))
     tree = TransformTree()
     for tf_topic in ("/tf_static", "/tf"):
         if tf_topic in topics:

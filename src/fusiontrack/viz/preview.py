@@ -8,6 +8,7 @@ One output frame per camera image when there is a camera, else one per laser sca
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -73,6 +74,10 @@ def render_preview(
     sensor or topic -> (4, 4) laser2world) place those scanners instead of ``/tf_static``, as the tracker did.
     """
     check_video_output(output)  # a folder, an unknown suffix or a missing folder: say so before reading anything
+    if max_frames is not None and (isinstance(max_frames, bool) or not max_frames >= 1):
+        raise ConfigError(f"max_frames: expected a number of frames >= 1, got {max_frames!r}")
+    if fps is not None and not (math.isfinite(fps) and fps > 0):
+        raise ConfigError(f"fps: expected a positive frame rate, got {fps!r}")
     paths = [recording] if isinstance(recording, Path | str) else list(recording)
     with Recording(paths) as rec:
         topics = rec.topics()
@@ -108,12 +113,13 @@ def render_preview(
         primary = image_topics[0] if image_topics else laser_topics[0]
         total = topics[primary].count if max_frames is None else min(topics[primary].count, max_frames)
         stream = rec.messages(laser_topics + image_topics + truth_topics, time_source="log")
-        if fps is None:
+        if fps is None:  # the recording's rate, within what players show (1-60 frames per second)
             span = topics[primary].duration_s
             fps = (topics[primary].count - 1) / span if span > 0 and topics[primary].count > 1 else 10.0
+            fps = min(max(fps, 1.0), 60.0)
         frames = _frames(stream, primary, laser_topics, tree, view, background, height_px, total, progress,
                          {t: rec.sensor_of(t) for t in topics}, _TrackCursor(tracks or []), scan_world)
-        n = write_video(output, frames, fps=min(max(fps, 1.0), 60.0))
+        n = write_video(output, frames, fps=fps)
     if n == 0:
         raise RecordingError(f"{', '.join(map(str, paths))}: no frame of {primary} to draw")
     return PreviewResult(n, tuple(laser_topics), tuple(image_topics), bool(truth_topics),
