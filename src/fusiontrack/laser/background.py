@@ -37,7 +37,7 @@ from typing import Any, Literal
 import numpy as np
 
 __all__ = ["BeamBackground", "all_initialised", "clean_ranges", "histogram_mode", "keep_primed_backgrounds",
-           "switch_geometry"]
+           "learn_short_backgrounds", "switch_geometry"]
 
 log = logging.getLogger(__name__)
 
@@ -343,9 +343,17 @@ class BeamBackground:
             return r < self._bg - self.tau_fg_m
 
     # ---------------------------------------------------------------------------------------------
+    def initialise_now(self, min_scans: int = 1) -> bool:
+        """Learn the background now from the scans seen so far when there are fewer than ``n_init`` but at least
+        ``min_scans`` (a recording that ends sooner: its scans are all there is). Returns whether it is learnt."""
+        if not self.initialised and self._n_seen >= max(int(min_scans), 1):
+            self._initialise()
+            self._n_seen = self.n_init
+        return self.initialised
+
     def _initialise(self) -> None:
         no_return = self.range_max_m if math.isfinite(self.range_max_m) else np.nan
-        buf = self._buffer.astype(np.float64)
+        buf = self._buffer[:self._n_seen].astype(np.float64)
         if self.init == "mode":
             self._bg = histogram_mode(buf, self.bin_m, no_return)
         else:
@@ -395,6 +403,22 @@ def all_initialised(states: Any) -> bool:
     """Whether every scanner state (objects with a ``background``) has an initialised background: a priming pass
     can stop."""
     return all(st.background is not None and st.background.initialised for st in states)
+
+
+PRIME_MIN_SCANS = 10  # a scanner that sent fewer than n_init scans in a whole recording: learnt from these if so many
+
+
+def learn_short_backgrounds(scanners: Any, used: Any) -> None:
+    """End of a priming pass that read the whole recording: a scanner whose background is not initialised sent
+    fewer than ``n_init`` scans in all. Online, nothing of it would ever be foreground (its people would go
+    undetected, silently); its background is learnt from the scans it sent instead, if at least
+    ``PRIME_MIN_SCANS`` (:meth:`BeamBackground.initialise_now`), with a warning. ``scanners``: sensor -> state
+    (``background``); ``used``: sensor -> scans the pass read."""
+    for name, st in scanners.items():
+        bg = st.background
+        if bg is not None and not bg.initialised and bg.initialise_now(PRIME_MIN_SCANS):
+            log.warning("laser %s: the recording holds %d of its scans, fewer than the %d its background is learnt "
+                        "from (n_init): learnt from those", name, used.get(name, 0), bg.n_init)
 
 
 def keep_primed_backgrounds(states: Any) -> None:

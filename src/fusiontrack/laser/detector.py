@@ -60,6 +60,7 @@ from fusiontrack.laser.background import (
     InitMethod,
     all_initialised,
     keep_primed_backgrounds,
+    learn_short_backgrounds,
     switch_geometry,
 )
 from fusiontrack.laser.clustering import Segments, cluster_scan, mean_shift_segments, segment_scan
@@ -261,9 +262,11 @@ class LaserPeopleDetector:
         Returns
         -------
         dict sensor -> int
-            Scans each scanner's priming took. A scanner whose background is not initialised at the end (too
-            few scans) is reset to nothing learnt, so that the tracking pass learns it online from its first
-            scan, as without priming.
+            Scans each scanner's priming took. A scanner whose background is not initialised at the end is reset
+            to nothing learnt, so that the tracking pass learns it online from its first scan, as without
+            priming; but when the priming read the whole recording (a recording shorter than ``n_init`` scans of
+            a scanner), its background is learnt from the scans it sent, if there are at least
+            ``PRIME_MIN_SCANS`` (10; a warning says so): online it would never have been learnt.
         """
         n_init = int(self._bg_args["n_init"])
         limit = 4 * n_init * len(self._scanners) if max_scans is None else int(max_scans)
@@ -276,6 +279,8 @@ class LaserPeopleDetector:
                 used[scan.sensor] += 1
             if all_initialised(self._scanners.values()):
                 break
+        else:  # the whole recording was read: a scanner short of n_init scans sent all it will
+            learn_short_backgrounds(self._scanners, used)
         keep_primed_backgrounds(self._scanners.values())
         for st in self._scanners.values():
             st.points_m = np.zeros((0, 2))

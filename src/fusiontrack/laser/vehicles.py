@@ -63,6 +63,7 @@ from fusiontrack.laser.background import (
     InitMethod,
     all_initialised,
     keep_primed_backgrounds,
+    learn_short_backgrounds,
     switch_geometry,
 )
 from fusiontrack.laser.clustering import segment_scan
@@ -1079,6 +1080,8 @@ class LaserVehicleDetector:
             used[scan.sensor] += 1
             if all_initialised(self._lasers.values()):
                 break
+        else:  # the whole recording was read: a laser short of n_init scans sent all it will
+            learn_short_backgrounds(self._lasers, used)
         keep_primed_backgrounds(self._lasers.values())
         self.dropped_scans = dict.fromkeys(self._lasers, 0)  # the tracking pass meets (and counts) them again
         return used
