@@ -461,3 +461,23 @@ def test_a_recording_shorter_than_the_background_learning_still_tracks_its_peopl
     people = {i for g in gt for i in g.ids}
     assert len(people) >= 5
     assert m.mota > 0.5  # (0 before: not one track)
+
+
+@pytest.mark.parametrize(("args", "option"), [
+    (["track", "{demo}", "--time", "log", "--area", "none", "--no-video", "-o", "{file}/sub"], "--output"),
+    (["eval", "{demo}", "{demo}", "-o", "{file}/m.json"], "--output"),
+    (["train-classifier", "--work", "{file}", "-o", "{tmp}/m.json"], "--work"),
+    (["train-classifier", "--work", "{tmp}/w", "-o", "{file}/x.json"], "--output"),
+    (["demo", "-o", "{file}/d"], "--output"),
+])
+def test_an_output_under_a_file_is_refused_before_any_work(shared_data, tmp_path, args, option):
+    """-o notabag.bag/sub used to track (or train, or evaluate) for minutes and fail only when writing, with an
+    OS error that did not name the option: now an error at once, naming the option and the file in the way."""
+    file = tmp_path / "notabag.bag"
+    file.write_text("not a folder", encoding="utf-8")
+    argv = [a.format(demo=shared_data / DEMO, file=file, tmp=tmp_path) for a in args]
+    result = _cli(*argv)
+    assert result.returncode == 2, result.stderr
+    assert f"error: {option} " in result.stderr
+    assert "is a file" in result.stderr
+    assert "Traceback" not in result.stderr

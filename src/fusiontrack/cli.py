@@ -200,17 +200,30 @@ def _check_time(time_source: str) -> None:
         raise ConfigError(f"--time: expected 'header' or 'log', got {time_source!r}")
 
 
-def _out_folder(path: Path) -> Path:
-    """``--output`` that names a folder to write into: refused, naming it, when it is an existing file."""
+def _no_folder_under_a_file(path: Path, option: str) -> None:
+    """Refused before any work, naming the option: a path whose nearest existing parent is a file (no folder can be
+    made there; found only when writing, after the work, the error lost it)."""
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise ConfigError(f"{option} {path}: {parent} is a file, not a folder")
+            return
+
+
+def _out_folder(path: Path, option: str = "--output") -> Path:
+    """``--output`` that names a folder to write into: refused, naming it, when it is an existing file or lies
+    under one."""
     if path.exists() and not path.is_dir():
-        raise ConfigError(f"--output {path}: is a file; give a folder to write into")
+        raise ConfigError(f"{option} {path}: is a file; give a folder to write into")
+    _no_folder_under_a_file(path, option)
     return path
 
 
 def _out_file(path: Path, example: str) -> Path:
-    """``--output`` that names a file: refused, naming it, when it is an existing folder."""
+    """``--output`` that names a file: refused, naming it, when it is an existing folder or lies under a file."""
     if path.is_dir():
         raise ConfigError(f"--output {path}: is a folder; give a file name (e.g. {path / example})")
+    _no_folder_under_a_file(path, "--output")
     return path
 
 
@@ -1227,6 +1240,7 @@ def train_classifier(
     if into_package and output is not None:
         raise ConfigError(f"--into-package writes {default_model_path()}: give it or --output, not both")
     target = default_model_path() if into_package else _out_file(output or Path(MODEL_FILE), MODEL_FILE)
+    _out_folder(work, "--work")
     with console.status("training") as status:
         model, report = train_default(work, crowd_seconds=crowd_seconds, road_seconds=road_seconds, data_dir=data,
                                       n_rounds=rounds, progress=lambda msg: status.update(msg))
@@ -1313,6 +1327,7 @@ def demo(
     if not recording.exists():
         raise FusiontrackError(f"demo recording not found: {recording} (the demo reads ../shared/data beside the "
                                "repository; run it from the repository root or pass --recording)")
+    _out_folder(output)
     output.mkdir(parents=True, exist_ok=True)
     for old in (output / "crowd", output / "recording"):
         if old.exists():
