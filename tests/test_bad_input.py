@@ -376,7 +376,8 @@ def test_an_output_that_cannot_be_written_is_one_line_naming_it(tmp_path):
     def eval_to(name: str) -> list[str]:
         return ["eval", str(tmp_path / "tracks.csv"), str(tmp_path / "gt.csv"), "-o", str(tmp_path / name)]
 
-    cases = [(eval_to("a_file/m.json"), f"{tmp_path / 'a_file'}: [Errno 17] File exists and is not a folder")]
+    cases = [(eval_to("a_file/m.json"),  # (refused before the evaluation, naming the option)
+              f"--output {tmp_path / 'a_file' / 'm.json'}: {tmp_path / 'a_file'} is a file, not a folder")]
     if Path("/dev/full").exists():  # writes to it fail: no space left on device
         (tmp_path / "full.json").symlink_to("/dev/full")
         cases.append((eval_to("full.json"),
