@@ -383,7 +383,7 @@ def test_an_output_that_cannot_be_written_is_one_line_naming_it(tmp_path):
         cases.append((eval_to("full.json"),
                       f"cannot write {tmp_path / 'full.json'}: [Errno 28] No space left on device"))
         with RecordingWriter(tmp_path / "rec") as w:
-            for i in range(20):
+            for i in range(60):  # (more than n_init: a shorter recording is said, in a warning line)
                 w.write(LaserScan((i + 1) * 100_000_000, "laser", "laser", -1.0, 0.02, 0.02, 5.0,
                                   np.full(100, 3.0, np.float32)))
         (tmp_path / "out").mkdir()
