@@ -311,6 +311,8 @@ def main() -> None:
     parser.add_argument("--rng", type=int, default=0, help="seed of the particle filters' random draws (the "
                         "simulated scenes stay the same): a figure at the edge of a target can move with it")
     args = parser.parse_args()
+    if args.rng < 0:
+        parser.error(f"--rng: expected a seed >= 0, got {args.rng}")
     if args.repeat < 1:
         parser.error(f"--repeat: expected at least 1, got {args.repeat}")
     console = Console(width=200)

@@ -147,7 +147,8 @@ def test_the_people_pipeline_poses_its_camera_as_the_pipeline_file_says(crowd, t
         _, _, stats = track_fused(crowd["path"], adaptive_bias=False, area_m=bounds, clock_corrections_ns=corr,
                                   camera_poses=given)
         runs[name] = stats
-    assert runs["away"].camera == "camera_0"  # a usable camera ...
+    assert runs["away"].camera == "camera_0"  # a usable camera (the one the overlay video draws through) ...
+    np.testing.assert_allclose(runs["away"].camera_model.cam2world, cam2world_from_camera_pose(away), atol=1e-9)
     assert runs["away"].train_updates == runs["away"].frames_used == 0  # ... that sees nobody: no image is read
     assert runs["recording"].train_updates > 0
     same, rec = runs["file, as the recording"], runs["recording"]

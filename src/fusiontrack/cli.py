@@ -639,6 +639,7 @@ def track(
             with Recording(recordings) as rec:  # the overlay names its lasers by sensor
                 poses = {rec.sensor_of(t): pose for t, pose in cfg.laser_poses().items()}
             ov = render_fused_overlay(recordings, output / "overlay.mp4", states, camera=fstats.camera,
+                                      camera_model=fstats.camera_model,  # (posed as the tracker's: -c's pose)
                                       image_topic=camera_topic, bias_history=fstats.bias, events=events,
                                       time_source=time_source, clock_corrections_ns=cfg.clock_corrections_ns(),
                                       lasers=lasers, laser_poses=poses or None)

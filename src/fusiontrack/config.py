@@ -80,6 +80,12 @@ class SensorConfig(_Model):
     def clock_offset_ns(self) -> int:
         return round(self.clock_offset_ms * 1e6)
 
+    @property
+    def has_pose(self) -> bool:
+        """Whether the pipeline file gives this sensor a ``pose`` (else ``pose`` is the origin, a placeholder: the
+        recording's ``/tf_static`` says where the sensor is)."""
+        return "pose" in self.model_fields_set
+
 
 class SyncConfig(_Model):
     window_ms: float = Field(200.0, ge=0.0)
@@ -116,7 +122,7 @@ class PipelineConfig(_Model):
         """topic -> laser2world ``(4, 4)`` of the lasers whose table gives a ``pose``: they override the
         recording's ``/tf_static`` (the laser pipelines' ``laser_poses``)."""
         return {s.topic: s.pose.matrix() for s in self.sensors.values()
-                if s.kind == SensorKind.LASER and "pose" in s.model_fields_set}
+                if s.kind == SensorKind.LASER and s.has_pose}
 
     def camera_poses(self) -> dict[str, np.ndarray]:
         """cam2world ``(4, 4)`` of the optical frame of the cameras whose table gives a ``pose`` (as ``fusiontrack
@@ -126,7 +132,7 @@ class PipelineConfig(_Model):
 
         out = {}
         for name, s in self.sensors.items():
-            if s.kind in (SensorKind.CAMERA, SensorKind.RGBD) and "pose" in s.model_fields_set:
+            if s.kind in (SensorKind.CAMERA, SensorKind.RGBD) and s.has_pose:
                 out[s.topic] = out[name] = cam2world_from_camera_pose(s.pose)
         return out
 

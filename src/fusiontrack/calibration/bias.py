@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from fusiontrack.geometry import PinholeCamera, transform_points, wrap_angle
-from fusiontrack.laser.background import BeamBackground
+from fusiontrack.laser.background import BeamBackground, learn_short_backgrounds
 from fusiontrack.types import LaserScan
 
 from .clusters import foreground_clusters
@@ -372,7 +372,8 @@ class HorizontalBiasEstimator:
         dict sensor -> int
             Scans each laser's priming took. A laser whose background is not initialised at the end (too few
             scans) is reset to nothing learnt, so that the pass learns it online from its first scan, as
-            without priming.
+            without priming; unless the priming read the whole recording: then it is learnt from the scans there
+            are (:func:`~fusiontrack.laser.background.learn_short_backgrounds`).
         """
         if isinstance(max_scans, bool) or not (max_scans is None or (isinstance(max_scans, int | np.integer)
                                                                       and max_scans >= 0)):
@@ -390,6 +391,8 @@ class HorizontalBiasEstimator:
             last[scan.sensor] = int(scan.t_ns)
             if all(las.background is not None and las.background.initialised for las in self._lasers.values()):
                 break
+        else:  # the whole recording was read: a laser short of bg_n_init scans sent all it will
+            learn_short_backgrounds(self._lasers, used)
         for name, laser in self._lasers.items():
             laser.scans.clear()
             if laser.background is not None and laser.background.initialised:

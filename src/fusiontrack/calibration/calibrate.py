@@ -142,7 +142,7 @@ def _reference2world(cfg: PipelineConfig, reference: str, source: str) -> np.nda
     if sensor is None:
         raise ConfigError(f"{source}: reference {reference!r} is neither 'world' nor a sensor; sensors: "
                           f"{sorted(cfg.sensors)}")
-    if "pose" not in sensor.model_fields_set:  # Pose() would silently put it at the origin
+    if not sensor.has_pose:  # Pose() would silently put it at the origin
         raise ConfigError(f"{source}: reference {reference!r} has no pose in the pipeline file: give its "
                           f"[sensors.{reference}] a pose, or measure the points in the world frame")
     return sensor.pose.matrix()
@@ -251,10 +251,10 @@ def calibrate_from_recording(pipeline: str | Path, camera: str, recording: str |
     wanted = list(lasers) if lasers is not None else laser_names or None
     cam2world = laser2world = None
     if poses_from == "pipeline":  # the poses the file gives; the others from /tf_static (not the origin)
-        if "pose" in cfg.sensors[camera].model_fields_set:
+        if cfg.sensors[camera].has_pose:
             cam2world = cam2world_from_camera_pose(previous)
         laser2world = {n: cfg.sensors[n].pose.matrix() for n in (wanted or [])
-                       if n in cfg.sensors and "pose" in cfg.sensors[n].model_fields_set}
+                       if n in cfg.sensors and cfg.sensors[n].has_pose}
     offsets = {n: s.clock_offset_ms for n, s in cfg.sensors.items() if s.clock_offset_ms}
     run = bias_from_recording(recording, camera, wanted, params, clock_offsets_ms=offsets, cam2world=cam2world,
                               laser2world=laser2world)
@@ -263,7 +263,7 @@ def calibrate_from_recording(pipeline: str | Path, camera: str, recording: str |
                                "unknown (are people walking in view of both sensors?)")
     comment = (f"fusiontrack calibrate --adaptive: yaw corrected by {math.degrees(run.bias_rad):+.3f} deg over "
                f"{int(np.count_nonzero(run.history.n_used))} frames")
-    if cam2world is None:  # the pose it started from: the recording's
+    if not cfg.sensors[camera].has_pose:  # the file had none: the pose it started from, the recording's
         previous = camera_pose_from_cam2world(run.camera.cam2world)
     return _finish(pipeline, camera, "adaptive-bias", run.corrected_camera.cam2world, previous, write, comment,
                    bias=run)

@@ -481,6 +481,8 @@ class FusionStats:
     reids: int = 0  # ... given the lost identity
     camera_s: float = 0.0  # time spent on the camera side (reading, learning, scoring)
     camera: str = ""  # the camera fused ("": none, the lasers alone)
+    # ... as calibrated (the pipeline file's pose, camera_poses, or /tf_static), before the bias learnt on it
+    camera_model: PinholeCamera | None = field(default=None, compare=False, repr=False)
     bias: CameraBias | None = None  # the camera's horizontal bias learnt before fusing (None: not learnt)
 
 
@@ -1566,11 +1568,11 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         if image_topic is None:
             log.warning("%s: no camera image topic: the people pipeline tracks with the lasers only", path)
         elif camera is None:
-            poses = dict(camera_poses or {})
-            cam2world = poses.get(image_topic, poses.get(cam_sensor))
-            if poses and cam2world is None:
+            given = dict(camera_poses or {})
+            cam2world = given.get(image_topic, given.get(cam_sensor))
+            if given and cam2world is None:
                 log.warning("%s: the camera poses given (%s) are not of camera %r (%s): its pose is read from "
-                            "/tf_static", path, ", ".join(sorted(poses)), cam_sensor, image_topic)
+                            "/tf_static", path, ", ".join(sorted(given)), cam_sensor, image_topic)
             first = next((m for m in rec.messages([image_topic]) if isinstance(m, Image)), None)
             if first is not None:
                 camera = camera_from_recording(rec, cam_sensor, first.frame_id, world_frame=world_frame,
@@ -1581,6 +1583,7 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
                             cam_sensor)
         if image_topic is None or camera is None:
             camera, cam_sensor = None, ""
+        calibrated = camera
         p = params or FusionParams()
         total = sum(c.msgcount for c in rec.connections if c.topic in lasers)  # from the index or metadata
         check_background(background)
@@ -1612,7 +1615,7 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
             raise ConfigError(f"area_m: expected 'auto', None, a rectangle or a polygon, got {area_m!r}")
         trk = FusionTracker(camera, frames, p, tracker_params, area_m=None if auto_area else area_m, rng=rng,
                             camera_name=cam_sensor or "camera")
-        trk.stats.camera, trk.stats.bias = cam_sensor, bias
+        trk.stats.camera, trk.stats.bias, trk.stats.camera_model = cam_sensor, bias, calibrated
         stream = synchronize(rec.messages(lasers, time_source=time_source), sync_window_ns,
                              clock_corrections_ns=laser_corrections)
         states, events = run_tracker(trk, detector, poses, stream, total=total, auto_area=auto_area,

@@ -289,7 +289,7 @@ class BeamBackground:
     @property
     def initialised(self) -> bool:
         """Whether the background is learnt: ``n_init`` scans seen since construction or the last reset, or carried
-        over from another geometry (:meth:`set_geometry`)."""
+        over from another geometry (:meth:`set_geometry`), or learnt early from fewer (:meth:`initialise_now`)."""
         return self._n_seen >= self.n_init
 
     @property
@@ -343,13 +343,16 @@ class BeamBackground:
             return r < self._bg - self.tau_fg_m
 
     # ---------------------------------------------------------------------------------------------
-    def initialise_now(self, min_scans: int = 1) -> bool:
-        """Learn the background now from the scans seen so far when there are fewer than ``n_init`` but at least
-        ``min_scans`` (a recording that ends sooner: its scans are all there is). Returns whether it is learnt."""
-        if not self.initialised and self._n_seen >= max(int(min_scans), 1):
-            self._initialise()
-            self._n_seen = self.n_init
-        return self.initialised
+    def initialise_now(self, min_scans: int = 1) -> int:
+        """Learn the background now from the scans seen so far (of the current geometry) when there are fewer than
+        ``n_init`` but at least ``min_scans`` (a recording that ends sooner: its scans are all there is). Returns
+        the number of scans it was learnt from (0: not learnt now)."""
+        n = self._n_seen
+        if self.initialised or n < max(int(min_scans), 1):
+            return 0
+        self._initialise()
+        self._n_seen = self.n_init
+        return n
 
     def _initialise(self) -> None:
         no_return = self.range_max_m if math.isfinite(self.range_max_m) else np.nan
@@ -416,9 +419,11 @@ def learn_short_backgrounds(scanners: Any, used: Any) -> None:
     (``background``); ``used``: sensor -> scans the pass read."""
     for name, st in scanners.items():
         bg = st.background
-        if bg is not None and not bg.initialised and bg.initialise_now(PRIME_MIN_SCANS):
+        n = 0 if bg is None else bg.initialise_now(PRIME_MIN_SCANS)
+        if n:
             log.warning("laser %s: the recording holds %d of its scans, fewer than the %d its background is learnt "
-                        "from (n_init): learnt from those", name, used.get(name, 0), bg.n_init)
+                        "from (n_init): learnt from the %d it has (of its last beam geometry)", name,
+                        used.get(name, n), bg.n_init, n)
 
 
 def keep_primed_backgrounds(states: Any) -> None:
