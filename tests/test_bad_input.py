@@ -470,6 +470,10 @@ def test_a_recording_shorter_than_the_background_learning_still_tracks_its_peopl
     (["train-classifier", "--work", "{file}", "-o", "{tmp}/m.json"], "--work"),
     (["train-classifier", "--work", "{tmp}/w", "-o", "{file}/x.json"], "--output"),
     (["demo", "-o", "{file}/d"], "--output"),
+    (["simulate", "crowd", "--seconds", "2", "-o", "{file}/sim"], "--output"),
+    (["convert", "{demo}", "-o", "{file}/mcap"], "--output"),
+    (["repair", "{demo}", "-o", "{file}/r.bag"], "--output"),
+    (["view", "{demo}", "-o", "{file}/v.mp4"], "--output"),
 ])
 def test_an_output_under_a_file_is_refused_before_any_work(shared_data, tmp_path, args, option):
     """-o notabag.bag/sub used to track (or train, or evaluate) for minutes and fail only when writing, with an

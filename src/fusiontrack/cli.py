@@ -274,6 +274,7 @@ def convert(
 
     if time_source not in ("header", "log"):
         raise ConfigError(f"--time: expected 'header' or 'log', got {time_source!r}")
+    _no_folder_under_a_file(output, "--output")
     cfg = _load_config(config)
     sync = Synchronizer(cfg.sync.window_ns, cfg.clock_corrections_ns())
     with Recording(recordings, sensors=cfg.topics()) as rec:
@@ -328,6 +329,7 @@ def repair(
     mcap recover do): the records are read from the start, up to the first incomplete or corrupt one."""
     from .io.recover import repair_recording
 
+    _no_folder_under_a_file(output, "--output")
     report = repair_recording(recording, output)
     console.print(escape(report.summary()), highlight=False, soft_wrap=True)
 
@@ -359,6 +361,7 @@ def view(
         raise ConfigError(f"--max-frames: expected a number of frames >= 1, got {max_frames}")
     if fps is not None and not (math.isfinite(fps) and fps > 0):
         raise ConfigError(f"--fps: expected a positive frame rate, got {fps}")
+    _no_folder_under_a_file(output, "--output")
     if not output.parent.exists():
         if output.suffix.lower() not in VIDEO_WRITE_SUFFIXES:
             check_video_output(output)  # a bad suffix is said first, before a folder is made for it
@@ -422,6 +425,7 @@ def simulate(
     from .sim.scenario import load_scenario
     from .sim.simulator import simulate as run_simulation
 
+    _no_folder_under_a_file(output, "--output")  # (said before the simulation, not after it)
     sc = load_scenario(scenario).with_overrides(seconds=seconds, seed=seed, settings=_parse_settings(set_))
     duration = sc.config.scenario.duration_s
     with progress() as bar:
