@@ -1025,8 +1025,7 @@ class FusionTracker:
         ok = np.isfinite(boxes).all(axis=1)
         # a learner whose box is not (enough) in the image gives the bank no patch: it does not learn, its state is
         # not confirmed by the camera, and the image is not read for it
-        seen = box_visibility(boxes, (self.camera.height, self.camera.width)) >= max(
-            self.bank.params.patches.min_visible, 1e-12)
+        seen = self.bank.samples_from(boxes, (self.camera.height, self.camera.width))
         learners = [k for k in learners if seen[k]]
         if not learners:
             self.stats.camera_s += time.perf_counter() - t0

@@ -902,6 +902,12 @@ class AppearanceBank:
             self._targets.pop(int(i), None)
 
     # -- training (B15) -----------------------------------------------------------------------------
+    def samples_from(self, boxes_px: np.ndarray, image_shape: tuple[int, ...]) -> np.ndarray:
+        """``(n,) bool``: which boxes are enough inside an image of ``image_shape`` to give patches
+        (``patches.min_visible`` of their area; none that is wholly off it), for :meth:`train` and
+        :meth:`box_scores` alike."""
+        return box_visibility(boxes_px, image_shape) >= max(self.params.patches.min_visible, 1e-12)
+
     def train(self, image: Any, boxes_by_id: Mapping[int, Sequence[float] | np.ndarray],
               train_ids: Iterable[int] | None = None, positions_m: Mapping[int, Sequence[float]] | None = None,
               mask: np.ndarray | None = None, force_update: bool = False) -> list[int]:
@@ -949,7 +955,7 @@ class AppearanceBank:
             return []
         row_of = {tid: k for k, tid in enumerate(ids)}
         boxes = as_boxes(np.array([np.asarray(boxes_by_id[i], np.float64).reshape(4) for i in ids]), "boxes_by_id")
-        vis = box_visibility(boxes, img.shape) >= max(p.patches.min_visible, 1e-12)
+        vis = self.samples_from(boxes, img.shape)
         rows = np.flatnonzero(vis)
         patches = sample_patches(boxes[rows], img.shape, p.patches, self.rng) if len(rows) else \
             Patches(np.zeros((0, 2), np.int64), np.zeros(0, np.int64), p.patches.size_px)
@@ -1088,7 +1094,7 @@ class AppearanceBank:
         img = validate_image(image, "image")
         rows = self._rows(ids)
         boxes = as_boxes(boxes_px)
-        vis = np.flatnonzero(box_visibility(boxes, img.shape) >= max(self.params.patches.min_visible, 1e-12))
+        vis = np.flatnonzero(self.samples_from(boxes, img.shape))
         out = np.full((len(boxes), len(rows)), np.nan)
         if not len(vis):
             return out
