@@ -135,14 +135,32 @@ def test_generic_t_s_with_gyro(tmp_path: Path) -> None:
     p.write_text("# my phone\nt_s,ax,ay,az,gx,gy,gz,temp\n"
                  "0.5,0,0,9.81,0.1,0.2,0.3,20\n"
                  "0.51,0.1,0,9.8,0.1,0.2,0.3,20\n\n"
-                 "0.52,0.2,0,9.7,nan,0.2,0.3,21\n")
+                 "0.52,0.2,0,9.7,0.1,0.2,0.3,21\n")
     imu = read_imu_csv(p)
     assert imu.format == "generic"
     np.testing.assert_array_equal(imu.t_ns, [500_000_000, 510_000_000, 520_000_000])
     np.testing.assert_array_equal(imu.accel_mps2[:, 2], [9.81, 9.8, 9.7])
     np.testing.assert_array_equal(imu.gyro_radps[0], [0.1, 0.2, 0.3])
-    assert np.isnan(imu.gyro_radps[2, 0])
     assert imu.samples[0].gyro_radps[1] == 0.2
+
+
+def test_generic_gyro_glitches_cost_their_samples_and_a_dead_gyro_is_dropped(tmp_path: Path) -> None:
+    p = tmp_path / "phone.csv"
+    t = np.arange(10) * 0.01
+
+    def write(gyro_nan: list[int]) -> None:
+        rows = [f"{x:.2f},0,0,9.81," + ("nan,nan,nan" if k in gyro_nan else "0.1,0.2,0.3") for k, x in enumerate(t)]
+        p.write_text("t_s,ax,ay,az,gx,gy,gz\n" + "\n".join(rows) + "\n")
+
+    write([3])  # one glitch: that sample goes, the gyroscope stays
+    imu = read_imu_csv(p)
+    assert len(imu) == 9
+    assert np.isfinite(imu.gyro_radps).all()
+    assert 3 * 10_000_000 not in imu.t_ns
+    write(list(range(3, 10)))  # the gyroscope died after 3 samples: keep every sample, without the gyroscope
+    imu = read_imu_csv(p)
+    assert len(imu) == 10
+    assert np.isnan(imu.gyro_radps).all()
 
 
 def test_generic_t_ns_exact_and_column_order(tmp_path: Path) -> None:
@@ -194,23 +212,68 @@ def test_generic_units_are_checked_where_they_show(tmp_path: Path) -> None:
 
 
 def test_bad_rows_name_file_and_line(tmp_path: Path) -> None:
+    # more bad rows than a sensor log's few: the file is not what it should be, and the error names the first
     p = tmp_path / "user9_hand.csv"
     good = "1000,0.1,0.2,9.8,0,0,0\n"
-    p.write_text(good * 3 + "1040,0.1,0.2,9.8,0,0\n" + good)
-    with pytest.raises(RecordingError, match=r"user9_hand\.csv, line 4: expected 7 comma-separated values"):
+    p.write_text(good * 3 + "1040,0.1,0.2,9.8,0,0\n" + good + "1060,0.1,0.2\n")
+    with pytest.raises(RecordingError, match=r"user9_hand\.csv, line 4: expected 7 comma-separated values.*"
+                                             r"\(2 of 6 rows are bad\)"):
         read_imu_csv(p)
-    p.write_text(good * 2 + "1030,0.1,abc,9.8,0,0,0\n")
+    p.write_text(good * 2 + "1030,0.1,abc,9.8,0,0,0\n" + "1030,0.1,x,9.8,0,0,0\n")
     with pytest.raises(RecordingError, match=r"user9_hand\.csv, line 3, column 3: expected a number"):
         read_imu_csv(p)
-    p.write_text(good + "10x0,0.1,0.2,9.8,0,0,0\n")
+    p.write_text(good + "10x0,0.1,0.2,9.8,0,0,0\n" + "10y0,0.1,0.2,9.8,0,0,0\n")
     with pytest.raises(RecordingError, match=r"line 2, column 1: expected an integer"):
         read_imu_csv(p, format="oxford_validation")
-    p.write_text("2000,0.1,0.2,9.8,0,0,0\n1000,0.1,0.2,9.8,0,1,0\n")
-    with pytest.raises(RecordingError, match=r"line 2: time goes backwards"):
+    p.write_text("2000,0.1,0.2,9.8,0,0,0\n1000,0.1,0.2,9.8,0,1,0\n1001,0.1,0.2,9.8,0,1,0\n")
+    with pytest.raises(RecordingError, match=r"line 2: time goes backwards.*\(2 rows out of order"):
         read_imu_csv(p)
     p.write_text("2000,0.1,0.2,9.8,0,0.5,0\n")
     with pytest.raises(RecordingError, match=r"line 1: steps_by_ground_truth must be a whole number"):
         read_imu_csv(p)
+    p.write_text("1000,nan,0.2,9.8,0,0,0\n")
+    with pytest.raises(RecordingError, match=r"no row has a finite acceleration"):
+        read_imu_csv(p)
+
+
+def test_a_clock_reset_is_an_error_not_a_drop(tmp_path: Path) -> None:
+    # one row 5 s back is not a message out of order but a second recording in the same file
+    p = tmp_path / "phone.csv"
+    rows = [f"{t:.2f},0,0,9.81" for t in np.arange(0, 10, 0.01)]
+    rows.insert(500, "0.00,0,0,9.81")
+    p.write_text("t_s,ax,ay,az\n" + "\n".join(rows) + "\n")
+    with pytest.raises(RecordingError, match=r"phone\.csv, line 502: time goes backwards"):
+        read_imu_csv(p)
+
+
+@needs_oxford
+def test_a_damaged_real_trace_loses_only_its_bad_rows(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A NaN sample, a garbled row, two rows swapped and a last line cut short (the phone stopped mid-write) in
+    a real trace: each bad row is dropped with a warning that names the file and line, and the rest is read
+    (before, any one of them refused the whole file)."""
+    src = _validation_file("frontpocket")
+    lines = src.read_text().splitlines()
+    clean = read_imu_csv(src)
+    damaged = list(lines)
+    fields = damaged[500].split(",")
+    fields[2] = "nan"
+    damaged[500] = ",".join(fields)  # line 501
+    damaged[900] = "garbage,,"  # line 901
+    damaged[700], damaged[701] = damaged[701], damaged[700]  # line 702 comes 10 ms before line 701
+    damaged[-1] = damaged[-1][:15]
+    p = tmp_path / "user1_frontpocket_damaged.csv"
+    p.write_text("\n".join(damaged))
+    with caplog.at_level("WARNING"):
+        imu = read_imu_csv(p)
+    warned = caplog.text
+    for what in ("line 501", "line 702", f"line 901, {len(lines)}"):
+        assert what in warned, what
+    assert len(imu) == len(clean) - 4
+    kept = np.isin(clean.t_ns, imu.t_ns)
+    assert np.count_nonzero(~kept) == 4  # exactly the four damaged rows are gone
+    np.testing.assert_array_equal(imu.accel_mps2, clean.accel_mps2[kept])
+    assert np.all(np.diff(imu.t_ns) >= 0)
+    assert imu.n_steps_gt == clean.n_steps_gt  # the cumulative ground truth survives
 
 
 def test_missing_empty_and_unknown(tmp_path: Path) -> None:

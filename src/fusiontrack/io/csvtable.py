@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -9,6 +10,11 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import RecordingError
+
+log = logging.getLogger(__name__)
+
+MAX_BAD_ROW_SHARE = 0.01
+"""``skip_bad_rows`` drops bad rows only while they are at most this share of the rows (or a single row)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -25,12 +31,15 @@ class NumericTable:
         The 1-based line of the file each row came from (for later error messages).
     header : list of str or None
         The header fields (stripped) when ``header=True``.
+    skipped_lines : tuple of int
+        The 1-based lines dropped as bad (``skip_bad_rows``).
     """
 
     values: np.ndarray
     ints: dict[int, np.ndarray]
     line_numbers: np.ndarray
     header: list[str] | None
+    skipped_lines: tuple[int, ...] = ()
 
     def __len__(self) -> int:
         return int(self.values.shape[0])
@@ -49,25 +58,18 @@ def _read_text(path: Path, what: str) -> str:
         raise RecordingError(f"{path}: cannot be read ({err.strerror or err}; expected {what})") from err
 
 
-def _locate_bad_line(
-    path: Path, rows: Sequence[tuple[int, str]], n_cols: int | None, int_cols: Sequence[int], what: str
-) -> RecordingError | None:
-    """Scan row by row for the first one that is not ``n_cols`` numbers; the error or ``None``."""
-    expected = n_cols if n_cols is not None else len(rows[0][1].split(","))
-    for lineno, line in rows:
-        fields = line.split(",")
-        if len(fields) != expected:
-            return RecordingError(
-                f"{path}, line {lineno}: expected {expected} comma-separated values ({what}), "
-                f"got {len(fields)}: {line.strip()[:80]!r}"
-            )
-        for col, text in enumerate(fields):
-            try:
-                int(text) if col in int_cols else float(text)
-            except ValueError:
-                kind = "an integer" if col in int_cols else "a number"
-                return RecordingError(f"{path}, line {lineno}, column {col + 1}: expected {kind} ({what}), "
-                                      f"got {text.strip()[:40]!r}")
+def _row_problem(lineno: int, line: str, expected: int, int_cols: Sequence[int], what: str) -> str | None:
+    """What is wrong with one row (``"line N: ..."``), or ``None`` when it is ``expected`` numbers."""
+    fields = line.split(",")
+    if len(fields) != expected:
+        return (f"line {lineno}: expected {expected} comma-separated values ({what}), "
+                f"got {len(fields)}: {line.strip()[:80]!r}")
+    for col, text in enumerate(fields):
+        try:
+            int(text) if col in int_cols else float(text)
+        except ValueError:
+            kind = "an integer" if col in int_cols else "a number"
+            return f"line {lineno}, column {col + 1}: expected {kind} ({what}), got {text.strip()[:40]!r}"
     return None
 
 
@@ -79,6 +81,7 @@ def read_numeric_table(
     header: bool = False,
     comment: str = "#",
     what: str = "a numeric CSV file",
+    skip_bad_rows: bool = False,
 ) -> NumericTable:
     """Read a comma-separated file of numbers, with errors that name the file and line.
 
@@ -95,6 +98,11 @@ def read_numeric_table(
         Lines starting with this (after leading blanks) are skipped, as are blank lines.
     what : str
         What the file should be, for error messages (e.g. ``"t_ns, ax, ay, az"``).
+    skip_bad_rows : bool
+        For a sensor log, where a row cut short (the recorder stopped mid-write) or garbled must not cost the
+        rest: rows with the wrong number of values, or a value that is not a number, are dropped with a
+        warning (their lines are in ``skipped_lines``) as long as they are few, at most one row or
+        :data:`MAX_BAD_ROW_SHARE` of the rows; more than that means the file is not ``what``: an error.
 
     Returns
     -------
@@ -103,7 +111,8 @@ def read_numeric_table(
     Raises
     ------
     RecordingError
-        Missing or unreadable file, no data rows, wrong column count or a value that is not a number.
+        Missing or unreadable file, no data rows, wrong column count or a value that is not a number (beyond
+        the few rows ``skip_bad_rows`` drops).
     """
     path = Path(path)
     text = _read_text(path, what)
@@ -119,19 +128,38 @@ def read_numeric_table(
             n_cols = len(names)
     if not rows:
         raise RecordingError(f"{path}: no data rows (expected {what})")
-    lines = [line for _, line in rows]
+    skipped: list[int] = []
     try:
-        values = np.loadtxt(lines, delimiter=",", dtype=np.float64, ndmin=2, comments=None)
-        if n_cols is not None and values.shape[1] != n_cols:
-            raise ValueError(f"{values.shape[1]} columns instead of {n_cols}")
-        ints = {c: np.loadtxt(lines, delimiter=",", dtype=np.int64, usecols=c, ndmin=1, comments=None)
-                for c in int_cols}
+        values, ints = _parse(rows, n_cols, int_cols)
     except ValueError as err:
-        located = _locate_bad_line(path, rows, n_cols, int_cols, what)
-        if located is None:
-            located = RecordingError(f"{path}: cannot be parsed as {what}: {err}")
-        raise located from err
+        expected = n_cols if n_cols is not None else len(rows[0][1].split(","))
+        problems = [(lineno, _row_problem(lineno, line, expected, int_cols, what)) for lineno, line in rows]
+        bad = [(lineno, why) for lineno, why in problems if why is not None]
+        if not bad:
+            raise RecordingError(f"{path}: cannot be parsed as {what}: {err}") from err
+        if not skip_bad_rows or len(bad) > max(1, int(MAX_BAD_ROW_SHARE * len(rows))) or len(bad) == len(rows):
+            more = f" ({len(bad)} of {len(rows)} rows are bad)" if len(bad) > 1 else ""
+            raise RecordingError(f"{path}, {bad[0][1]}{more}") from err
+        skipped = [lineno for lineno, _ in bad]
+        drop = set(skipped)
+        rows = [(lineno, line) for lineno, line in rows if lineno not in drop]
+        values, ints = _parse(rows, n_cols, int_cols)
+        shown = ", ".join(str(lineno) for lineno in skipped[:5]) + (", ..." if len(skipped) > 5 else "")
+        log.warning("%s: skipped %d bad row(s) of %d (line %s); the first: %s", path, len(bad),
+                    len(rows) + len(bad), shown, bad[0][1])
     line_numbers = np.array([i for i, _ in rows], dtype=np.int64)
-    return NumericTable(values=values, ints=ints, line_numbers=line_numbers, header=names)
+    return NumericTable(values=values, ints=ints, line_numbers=line_numbers, header=names,
+                        skipped_lines=tuple(skipped))
 
 
+def _parse(rows: Sequence[tuple[int, str]], n_cols: int | None,
+           int_cols: Sequence[int]) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+    """``np.loadtxt`` of the rows' text: all columns as float, ``int_cols`` also as exact int64 (ValueError on a bad
+    row, to be located by :func:`_row_problem`)."""
+    lines = [line for _, line in rows]
+    values = np.loadtxt(lines, delimiter=",", dtype=np.float64, ndmin=2, comments=None)
+    if n_cols is not None and values.shape[1] != n_cols:
+        raise ValueError(f"{values.shape[1]} columns instead of {n_cols}")
+    ints = {c: np.loadtxt(lines, delimiter=",", dtype=np.int64, usecols=c, ndmin=1, comments=None)
+            for c in int_cols}
+    return values, ints

@@ -33,9 +33,14 @@ Auto-detection: a folder, or a file named ``accelerometer.csv``, is ``oxford_opt
 the first data line decides: a header with letters is ``generic``, seven numbers are
 ``oxford_validation``, five numbers are ``oxford_optimisation`` (an accelerometer file alone).
 
-Rows must be in non-decreasing time order (repeated stamps occur in the Oxford data and are kept). A
-row with the wrong number of columns or a value that is not a number raises
-:class:`~fusiontrack.errors.RecordingError` naming the file and the line (1-based, as an editor shows it).
+Bad sensor data inside a log costs only its samples, each drop a warning naming the file and line: a row cut
+short (the phone stopped mid-write) or garbled, a sample with a non-finite time or acceleration, a sample whose
+gyroscope is non-finite (or, when that is most of them, the gyroscope altogether), and a row that comes after a
+later stamp by up to :data:`MAX_BACK_S` (out of order). Repeated stamps occur in the Oxford data and are kept.
+More than a few bad rows (:data:`~fusiontrack.io.csvtable.MAX_BAD_ROW_SHARE` of them, or one) or out-of-order rows,
+a larger step back in time (a clock reset: two recordings in one file), or no usable row at all mean the file is
+not what it should be: :class:`~fusiontrack.errors.RecordingError` naming the file and the first bad line (1-based,
+as an editor shows it).
 No pandas: parsing is ``np.loadtxt`` with a line-by-line scan only to locate an error.
 """
 
@@ -51,7 +56,7 @@ import numpy as np
 from ..errors import ConfigError, RecordingError
 from ..inertial.preprocess import G_MPS2
 from ..types import ImuSample
-from .csvtable import NumericTable, read_numeric_table
+from .csvtable import MAX_BAD_ROW_SHARE, NumericTable, read_numeric_table
 
 __all__ = [
     "IMU_CSV_FORMATS",
@@ -66,17 +71,56 @@ IMU_CSV_FORMATS = ("oxford_validation", "oxford_optimisation", "generic")
 """The values ``format=`` accepts besides ``"auto"``."""
 
 
-def _check_time_order(path: Path, t_ns: np.ndarray, line_numbers: np.ndarray) -> None:
-    back = np.flatnonzero(np.diff(t_ns) < 0)
-    if back.size:
-        i = int(back[0]) + 1
-        raise RecordingError(
-            f"{path}, line {int(line_numbers[i])}: time goes backwards ({int(t_ns[i])} ns after "
-            f"{int(t_ns[i - 1])} ns); expected rows in non-decreasing time order"
-        )
+MAX_BACK_S = 1.0
+"""How far behind the latest stamp a row may come and still be dropped as out of order (a larger step back is a
+clock reset: two recordings in one file, an error)."""
+
+
+def _check_time_order(path: Path, t_ns: np.ndarray, line_numbers: np.ndarray) -> np.ndarray:
+    """Rows to keep: all, but a few that come after a later stamp (out of order by up to :data:`MAX_BACK_S`), which
+    are dropped with a warning. Many such rows, or a larger step back, are an error naming the first line."""
+    latest = np.maximum.accumulate(t_ns)
+    back = np.flatnonzero(t_ns < latest)
     n_repeat = int(np.count_nonzero(np.diff(t_ns) == 0))
     if n_repeat:
         logger.debug("%s: %d samples repeat the previous time stamp", path, n_repeat)
+    if not back.size:
+        return np.ones(t_ns.size, dtype=bool)
+    i = int(back[0])
+    lag_s = float((latest[back] - t_ns[back]).max()) * 1e-9
+    if back.size > max(1, int(MAX_BAD_ROW_SHARE * t_ns.size)) or lag_s > MAX_BACK_S:
+        raise RecordingError(
+            f"{path}, line {int(line_numbers[i])}: time goes backwards ({int(t_ns[i])} ns after "
+            f"{int(latest[i])} ns); expected rows in non-decreasing time order"
+            + (f" ({back.size} rows out of order, up to {lag_s:.3g} s back)" if back.size > 1 else "")
+        )
+    logger.warning("%s: dropped %d sample(s) out of time order (up to %.3g s back), first at line %d",
+                   path, back.size, lag_s, int(line_numbers[i]))
+    keep = np.ones(t_ns.size, dtype=bool)
+    keep[back] = False
+    return keep
+
+
+def _finite_rows(path: Path, x: np.ndarray, line_numbers: np.ndarray, what: str) -> np.ndarray:
+    """Rows of ``x (n, k)`` that are all finite; the others (a NaN sample, a sensor that stopped) are dropped
+    with a warning."""
+    ok = np.isfinite(x).all(axis=1)
+    if not ok.any():
+        raise RecordingError(f"{path}: no row has a finite {what} (line {int(line_numbers[0])}: {x[0].tolist()})")
+    if not ok.all():
+        bad = np.flatnonzero(~ok)
+        logger.warning("%s: dropped %d sample(s) with a non-finite %s, first at line %d", path, bad.size, what,
+                       int(line_numbers[bad[0]]))
+    return ok
+
+
+def _keep(table: NumericTable, keep: np.ndarray) -> NumericTable:
+    """The table's rows where ``keep``."""
+    if keep.all():
+        return table
+    return NumericTable(values=table.values[keep], ints={c: v[keep] for c, v in table.ints.items()},
+                        line_numbers=table.line_numbers[keep], header=table.header,
+                        skipped_lines=table.skipped_lines)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -194,9 +238,10 @@ def _int_column(path: Path, table: NumericTable, col: int, name: str) -> np.ndar
 
 
 def _read_validation(path: Path, sensor: str, frame_id: str) -> ImuCsv:
-    table = read_numeric_table(path, n_cols=7, int_cols=(0,), what=_VALIDATION_COLS)
+    table = read_numeric_table(path, n_cols=7, int_cols=(0,), what=_VALIDATION_COLS, skip_bad_rows=True)
+    table = _keep(table, _finite_rows(path, table.values[:, 1:4], table.line_numbers, "acceleration"))
+    table = _keep(table, _check_time_order(path, table.ints[0], table.line_numbers))
     t_ns = table.ints[0]
-    _check_time_order(path, t_ns, table.line_numbers)
     app, gt, hw = (_int_column(path, table, c, name) for c, name in
                    ((4, "steps_by_app"), (5, "steps_by_ground_truth"), (6, "steps_by_hw")))
     return ImuCsv(path, "oxford_validation", sensor, frame_id, t_ns, table.values[:, 1:4].copy(),
@@ -207,9 +252,10 @@ def _read_validation(path: Path, sensor: str, frame_id: str) -> ImuCsv:
 def _read_optimisation(path: Path, sensor: str, frame_id: str) -> ImuCsv:
     folder = path if path.is_dir() else path.parent
     accel_path = folder / "accelerometer.csv" if path.is_dir() else path
-    table = read_numeric_table(accel_path, n_cols=5, int_cols=(0,), what=_ACCEL_COLS)
+    table = read_numeric_table(accel_path, n_cols=5, int_cols=(0,), what=_ACCEL_COLS, skip_bad_rows=True)
+    table = _keep(table, _finite_rows(accel_path, table.values[:, 2:5], table.line_numbers, "acceleration"))
+    table = _keep(table, _check_time_order(accel_path, table.ints[0], table.line_numbers))
     t_ns = table.ints[0]
-    _check_time_order(accel_path, t_ns, table.line_numbers)
     kinds = np.unique(table.values[:, 1])
     if kinds.size > 1:
         logger.warning("%s: several sensor_type values %s; all rows are read as accelerometer",
@@ -217,9 +263,9 @@ def _read_optimisation(path: Path, sensor: str, frame_id: str) -> ImuCsv:
     step_path = folder / "stepcounter.csv"
     gt_times = hw_times = None
     if step_path.is_file():
-        steps = read_numeric_table(step_path, n_cols=3, int_cols=(0,), what=_STEP_COLS)
+        steps = read_numeric_table(step_path, n_cols=3, int_cols=(0,), what=_STEP_COLS, skip_bad_rows=True)
+        steps = _keep(steps, _check_time_order(step_path, steps.ints[0], steps.line_numbers))
         ts = steps.ints[0]
-        _check_time_order(step_path, ts, steps.line_numbers)
         gt_times = _toggle_times(ts, _int_column(step_path, steps, 1, "gt_step_event"))
         hw_times = _toggle_times(ts, _int_column(step_path, steps, 2, "hw_step_event"))
     else:
@@ -233,51 +279,62 @@ _PHONE_GYRO_MAX_RADPS = 35.0  # phone gyroscopes saturate at 2000 deg/s (34.9 ra
 
 
 def _read_generic(path: Path, sensor: str, frame_id: str) -> ImuCsv:
-    table = read_numeric_table(path, header=True, what=_GENERIC_DOC)
+    table = read_numeric_table(path, header=True, what=_GENERIC_DOC, skip_bad_rows=True)
     names = [n.lower() for n in table.header or []]
     missing = [n for n in ("ax", "ay", "az") if n not in names]
     if not {"t_ns", "t_ms", "t_s"} & set(names) or missing:
         raise RecordingError(f"{path}, line {int(table.line_numbers[0]) - 1}: header {table.header} "
                              f"lacks {missing or ['t_ns, t_ms or t_s']} (expected {_GENERIC_DOC})")
-    if "t_ns" in names:
-        t_ns = _int_column(path, table, names.index("t_ns"), "t_ns")
-        col = names.index("t_ns")
+    gyro_names = ("gx", "gy", "gz")
+    if any(n in names for n in gyro_names) and not all(n in names for n in gyro_names):
+        raise RecordingError(f"{path}: header {table.header} has only some of gx, gy, gz "
+                             "(expected all three or none)")
+    name = next(n for n in ("t_ns", "t_ms", "t_s") if n in names)
+    col = names.index(name)
+    accel_cols = [names.index(n) for n in ("ax", "ay", "az")]
+    table = _keep(table, _finite_rows(path, table.values[:, [col]], table.line_numbers, name))
+    table = _keep(table, _finite_rows(path, table.values[:, accel_cols], table.line_numbers, "acceleration"))
+    if name == "t_ns":
+        t_ns = _int_column(path, table, col, "t_ns")
         if np.abs(table.values[:, col]).max() >= 2.0**53:  # beyond float64's exact integers
-            exact = read_numeric_table(path, header=True, int_cols=(col,), what=_GENERIC_DOC)
-            t_ns = exact.ints[col]
+            exact = read_numeric_table(path, header=True, int_cols=(col,), what=_GENERIC_DOC, skip_bad_rows=True)
+            t_ns = exact.ints[col][np.isin(exact.line_numbers, table.line_numbers)]
     else:
-        name, scale = ("t_ms", 1e6) if "t_ms" in names else ("t_s", 1e9)
-        t = table.values[:, names.index(name)]
-        bad = np.flatnonzero(~np.isfinite(t))
-        if bad.size:
-            raise RecordingError(f"{path}, line {int(table.line_numbers[bad[0]])}: {name} must be a finite number, "
-                                 f"got {t[bad[0]]!r}")
+        t = table.values[:, col]
         if name == "t_s" and np.abs(t).max() > 1e11:  # past the year 5000 in seconds: milliseconds since 1970
             raise RecordingError(f"{path}: t_s reaches {np.abs(t).max():.6g}, which is milliseconds (or finer), "
                                  f"not seconds: name the column t_ms (or t_ns)")
-        t_ns = np.rint(t * scale).astype(np.int64)
-    _check_time_order(path, t_ns, table.line_numbers)
-    accel = table.values[:, [names.index(n) for n in ("ax", "ay", "az")]]
+        t_ns = np.rint(t * (1e6 if name == "t_ms" else 1e9)).astype(np.int64)
+    keep = _check_time_order(path, t_ns, table.line_numbers)
+    table, t_ns = _keep(table, keep), t_ns[keep]
+    accel = table.values[:, accel_cols]
     norm = np.linalg.norm(accel, axis=1)
-    if np.isfinite(norm).any() and np.nanmedian(norm) < 0.3 * G_MPS2:
-        raise RecordingError(f"{path}: the acceleration's median magnitude is {np.nanmedian(norm):.3g}, not about "
+    if np.median(norm) < 0.3 * G_MPS2:
+        raise RecordingError(f"{path}: the acceleration's median magnitude is {np.median(norm):.3g}, not about "
                              f"9.81: ax, ay, az must be the specific force in m/s^2, gravity included, as phones "
                              f"report it (values in g: multiply by 9.81; gravity-free 'linear acceleration' will "
                              f"not do)")
-    gyro_names = ("gx", "gy", "gz")
+    gyro = np.full((t_ns.size, 3), np.nan)
     if all(n in names for n in gyro_names):
         gyro = table.values[:, [names.index(n) for n in gyro_names]]
-        rate = np.abs(gyro[np.isfinite(gyro).all(axis=1)])
+        ok = np.isfinite(gyro).all(axis=1)
+        rate = np.abs(gyro[ok])
         top = float(np.percentile(rate, 99)) if rate.size else 0.0  # (a glitch or two is not the unit)
         if top > _PHONE_GYRO_MAX_RADPS:
             raise RecordingError(f"{path}: the gyroscope's 99th percentile is {top:.4g}, beyond a phone "
                                  f"gyroscope's range (2000 deg/s = 34.9 rad/s): gx, gy, gz must be in rad/s "
                                  f"(values in deg/s: multiply by pi/180)")
-    else:
-        if any(n in names for n in gyro_names):
-            raise RecordingError(f"{path}: header {table.header} has only some of gx, gy, gz "
-                                 "(expected all three or none)")
-        gyro = np.full((t_ns.size, 3), np.nan)
+        if ok.any() and not ok.all():
+            # a few gyro glitches cost their samples; a gyroscope missing from most of the file is not used at all
+            # (the attitude then comes from the accelerometer alone), rather than lose most of the steps
+            if np.count_nonzero(~ok) <= ok.size // 2:
+                logger.warning("%s: dropped %d sample(s) with a non-finite gyroscope, first at line %d", path,
+                               np.count_nonzero(~ok), int(table.line_numbers[np.flatnonzero(~ok)[0]]))
+                table, t_ns, accel, gyro = _keep(table, ok), t_ns[ok], accel[ok], gyro[ok]
+            else:
+                logger.warning("%s: the gyroscope is missing (non-finite) from %d of %d samples; it is not used",
+                               path, np.count_nonzero(~ok), ok.size)
+                gyro = np.full((t_ns.size, 3), np.nan)
     return ImuCsv(path, "generic", sensor, frame_id, t_ns, accel, gyro)
 
 
