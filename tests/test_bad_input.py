@@ -175,6 +175,17 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         (["track", "{demo}", "-o", "{out}", "-c", "{laser_neg}"], "[laser]: min_segment_points: expected an integer"),
         (["track", "{demo}", "-o", "{out}", "-c", "{laser_text}"], "[laser]: alpha: expected a number, got 'x'"),
         (["track", "{demo}", "-o", "{out}", "-c", "{tracking_typo}"], "tracking_typo.toml: [tracking]: unknown"),
+        # every table is checked whatever the pipeline (a typo in one the run does not use was silently ignored),
+        # and the errors of the tables read later name the file too
+        (["track", "{demo}", "-o", "{out}", "-c", "{fusion_typo}"],
+         "fusion_typo.toml: [fusion]: unknown key(s) check_margn"),
+        (["track", "{demo}", "-o", "{out}", "-c", "{wearable_typo}", "--pipeline", "wearable"],
+         "wearable_typo.toml: [wearable]: wearable: unknown option 'phone'"),
+        (["track", "{demo}", "-o", "{out}", "-c", "{traffic_workers}", "--pipeline", "traffic"],
+         "traffic_workers.toml: [traffic]: traffic.workers: expected an integer >= 0"),
+        # a sensor's topic that the recording does not have: the file and the sensor's table
+        (["track", "{demo}", "-o", "{out}", "-c", "{topic_missing}"],
+         "topic_missing.toml: [sensors.front] topic '/nope' is not in"),
         # numbers that are not finite, and a negative seed: the setting named, no traceback
         (["simulate", "crowd", "-o", "{out}", "--seconds", "inf"], "scenario.duration_s: Input should be a finite"),
         (["simulate", "crowd", "-o", "{out}", "--seconds", "1", "--seed", "-1"],
@@ -225,7 +236,9 @@ def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args
     junk.write_bytes(b"\x00" * 100)
     tables = {"laser_typo": "[laser]\nmin_segmnt_points = 10\n", "laser_neg": "[laser]\nmin_segment_points = -5\n",
               "laser_text": "[laser]\nalpha = 'x'\n", "tracking_typo": "[tracking]\nnum_particles = 10\n",
-              "tracking_pf": "[tracking]\ncap_merges = true\n",
+              "tracking_pf": "[tracking]\ncap_merges = true\n", "fusion_typo": "[fusion]\ncheck_margn = 0.5\n",
+              "wearable_typo": "[wearable]\nphone = 'a'\n", "traffic_workers": "[traffic]\nworkers = -3\n",
+              "topic_missing": '[sensors.front]\nkind = "laser"\ntopic = "/nope"\n',
               "offset_inf": '[sensors.l0]\nkind = "laser"\ntopic = "/scan"\nclock_offset_ms = inf\n'}
     for name, text in tables.items():
         (tmp_path / f"{name}.toml").write_text(text)

@@ -54,7 +54,7 @@ def test_the_track_command_reports_a_bad_fusion_table(shared_data, tmp_path):
     result = subprocess.run([sys.executable, "-m", "fusiontrack", "track", str(bag), "--pipeline", "people",
                              "-c", str(cfg), "-o", str(tmp_path / "out")], capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
-    assert f"{cfg}: fusion" in result.stderr
+    assert f"{cfg}: [fusion]" in result.stderr
     assert "check_margin" in result.stderr
     assert not (tmp_path / "out" / "tracks.csv").exists()
 

@@ -185,9 +185,30 @@ def info(
 
 
 def _load_config(path: Path | None) -> Any:
+    """The pipeline file, its every section checked at once whatever the pipeline, errors naming the file (a typo in
+    a table the run does not use was silently ignored; in one it uses, named the key but not the file)."""
     from .config import PipelineConfig, load_config
 
-    return load_config(path) if path is not None else PipelineConfig()
+    if path is None:
+        return PipelineConfig()
+    cfg = load_config(path)
+    if cfg.laser:
+        from .laser.detector import check_detector_params
+
+        check_detector_params(cfg.laser, f"{path}: [laser]")
+    if cfg.fusion:
+        from .fusion import FusionParams
+
+        FusionParams.from_mapping(cfg.fusion, f"{path}: [fusion]")
+    if cfg.traffic:
+        from .fusion.traffic import TrafficParams
+
+        TrafficParams.from_mapping({k: v for k, v in cfg.traffic.items() if k != "calibration"}, f"{path}: [traffic]")
+    if cfg.wearable:
+        from .fusion.wearable import check_options
+
+        check_options(cfg.wearable, f"{path}: [wearable]")
+    return cfg
 
 
 def _counts(counts: Mapping[str, int] | None) -> str:
@@ -225,6 +246,26 @@ def _out_file(path: Path, example: str) -> Path:
         raise ConfigError(f"--output {path}: is a folder; give a file name (e.g. {path / example})")
     _no_folder_under_a_file(path, "--output")
     return path
+
+
+def _check_sensor_topics(cfg: Any, config: Path | None, recordings: Sequence[Path], kinds: set[str]) -> None:
+    """The topics the pipeline file gives the sensors of ``kinds`` are in the recording: else an error naming the
+    file and the sensor's table, before any reading (the recording's own error named neither)."""
+    if config is None or not any(s.kind in kinds for s in cfg.sensors.values()):
+        return
+    from .errors import TopicError
+    from .io.recording import Recording
+
+    with Recording(recordings) as rec:
+        have = set(rec.topics())
+    for name, sensor in cfg.sensors.items():
+        if sensor.kind not in kinds:
+            continue
+        for key in ("topic", "info_topic", "depth_topic"):
+            topic = getattr(sensor, key)
+            if topic and topic not in have:
+                raise TopicError(f"{config}: [sensors.{name}] {key} {topic!r} is not in "
+                                 f"{', '.join(str(p) for p in recordings)}; it has: {', '.join(sorted(have))}")
 
 
 def _check_laser_tables(cfg: Any, config: Path | None, tracker_kind: str) -> None:
@@ -567,6 +608,7 @@ def track(
 
     cfg = _load_config(config)
     _check_laser_tables(cfg, config, tracker_kind)
+    _check_sensor_topics(cfg, config, recordings, {"laser", "camera", "rgbd"} if pipeline == "people" else {"laser"})
     topics = [s.topic for s in cfg.sensors.values() if s.kind == "laser"] or None
     area_m: Any = {"auto": "auto", "none": None}.get(area)
     if area_m is None and area != "none":
@@ -584,7 +626,7 @@ def track(
 
             if tracker_kind != "pf":
                 raise ConfigError(f"--tracker: the people pipeline uses the pf tracker, got {tracker_kind!r}")
-            fusion_params = FusionParams.from_mapping(cfg.fusion, f"{config}: fusion") if cfg.fusion else None
+            fusion_params = FusionParams.from_mapping(cfg.fusion, f"{config}: [fusion]") if cfg.fusion else None
             states, events, fstats = track_fused(
                 recordings, params=fusion_params, tracker_params=cfg.tracking or None, camera_topic=camera_topic,
                 topics=topics, time_source=time_source, clock_corrections_ns=cfg.clock_corrections_ns(),

@@ -152,7 +152,10 @@ class TrafficParams:
             kw["fusion"] = as_params(dict(values["fusion"]), f"{source}.fusion")
         if "tracker" in values:
             kw["tracker"] = VehiclePfParams.from_mapping(dict(values["tracker"]), f"{source}.tracker")
-        return cls(**kw)
+        try:
+            return cls(**kw)
+        except ConfigError as err:
+            raise ConfigError(f"{source}: {err}") from None
 
 
 @dataclass

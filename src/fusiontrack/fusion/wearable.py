@@ -45,7 +45,7 @@ from .wearable_correct import Correction, correct_phone
 from .wearable_data import Inputs, PhoneTrack, read_inputs
 from .wearable_visual import VisualParams, VisualTrack, track_visual
 
-__all__ = ["PersonResult", "WearableParams", "WearableResult", "run_wearable", "track_wearable"]
+__all__ = ["PersonResult", "WearableParams", "WearableResult", "check_options", "run_wearable", "track_wearable"]
 
 log = logging.getLogger(__name__)
 
@@ -269,6 +269,15 @@ def track_wearable(recording: str | Path, params: WearableParams | None = None) 
         all_events += ev
     all_events.sort(key=lambda e: e.t_ns)
     return WearableResult(people, all_events, tracklets, owner, margin, cam_info, inputs, seconds)
+
+
+def check_options(options: Mapping[str, Any], source: str) -> None:
+    """Check a pipeline file's ``[wearable]`` table (keys and values as :func:`run_wearable` takes them) before any
+    reading; errors name ``source``."""
+    try:
+        _params_from(options)
+    except ConfigError as err:
+        raise ConfigError(f"{source}: {err}") from None
 
 
 def _params_from(options: Mapping[str, Any]) -> WearableParams:
