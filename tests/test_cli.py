@@ -88,6 +88,21 @@ def test_view_of_a_real_rgbd_bag_shows_the_image(shared_data, tmp_path):
     assert frame[:, -300:].std() > 20  # the camera half holds a real picture
 
 
+def test_convert_of_the_five_rgbd_snapshot_bags_keeps_all_fifteen_messages(shared_data, tmp_path):
+    """README: ``fusiontrack convert ../shared/data/rgbd/tue_rgbd_people/*.bag``, five bags of three messages, the
+    second 40 s after the first. The synchroniser dropped two of them as bad stamps (13 of 15 were written)."""
+    from fusiontrack.io.recording import Recording
+
+    bags = sorted(str(p) for p in (shared_data / "rgbd/tue_rgbd_people").glob("*.bag"))
+    result = run("convert", *bags, "-o", str(tmp_path / "rgbd"))
+    assert "wrote 15 messages" in result.stdout
+    assert "dropped" not in result.stderr
+    with Recording(tmp_path / "rgbd") as rec:
+        assert {t: i.count for t, i in rec.topics().items()} == {
+            "/hero/head_rgbd_sensor/depth_registered/image": 5, "/hero/head_rgbd_sensor/rgb/camera_info": 5,
+            "/hero/head_rgbd_sensor/rgb/image_raw": 5}
+
+
 def test_view_without_lasers_or_images_is_a_clear_error(tmp_path):
     from fusiontrack.io.writer import write_recording
     from fusiontrack.types import ImuSample

@@ -123,6 +123,25 @@ def test_a_bad_stamp_on_the_first_message_does_not_set_the_clock():
     assert not sync.dropped
 
 
+def test_recordings_of_a_few_messages_each_read_as_one_lose_nothing():
+    """Five snapshot bags of three messages each (image, depth, camera info; ../shared/data/rgbd/tue_rgbd_people),
+    the second 40 s after the first: the jump falls within the first five messages, which are judged against their
+    median. Two of the second bag's messages were dropped as bad stamps; the messages after them confirm the jump."""
+    ms = 1_000_000
+    starts = [0, 40_000, 47_000, 52_000, 56_000]  # ms, as the bags' times 12:41:38 .. 12:42:34
+    stream = [imu((t0 + dt) * ms, s) for t0 in starts for dt, s in ((0, "depth"), (300, "info"), (1100, "rgb"))]
+    out, sync = _kept(stream)
+    assert out == [r.t_ns for r in stream]
+    assert not sync.dropped_ahead
+    assert not sync.dropped
+    # one bad stamp among the first messages, with the old clock going on after it, is still dropped
+    bad = [imu(t * ms, "ab"[k % 2]) for k, t in enumerate(range(0, 200, 40))]
+    bad[3] = imu(H_NS, "a")
+    out, sync = _kept(bad + [imu(t * ms, "ab"[k % 2]) for k, t in enumerate(range(200, 400, 40))])
+    assert H_NS not in out
+    assert sync.dropped_ahead == {"a": 1}
+
+
 def test_unrelated_bad_stamps_in_a_row_are_not_a_jump():
     """Three bad stamps in a row (1 h, 5 h, 9 h ahead) disagree with each other: no jump, all three dropped."""
     ms = 1_000_000

@@ -67,8 +67,10 @@ class Synchronizer:
         old clock go on as usual (a sensor logged a little late still sends a few); ``leap_confirm`` of them, or
         a leap that disagrees, show the held ones to be bad stamps: they are dropped (counted in
         :attr:`dropped_ahead`). The first ``2 * leap_confirm - 1`` messages of the stream are judged against
-        their median time (more than ``leap_ns`` plus 5 median deviations after it: a bad stamp), so that a
-        bad stamp on the very first message cannot set the clock. Default 10 s.
+        their median time, so that a bad stamp on the very first message cannot set the clock: one more than
+        ``leap_ns`` plus 5 median deviations after it is a bad stamp if ``leap_confirm`` of the others come after
+        it, and otherwise a leap, held after them (a stream that jumps within its first messages, as recordings of
+        three messages each read as one). Default 10 s.
     leap_confirm : int
         Leaps that confirm a jump (default 3: one or two bad stamps are dropped). Leaps still held when
         the stream ends harm nothing after them: they are let through if they agree with each other and are
@@ -131,9 +133,17 @@ class Synchronizer:
             times = np.array([t for t, _ in first], np.float64)
             median = float(np.median(times))
             limit = median + leap + 5.0 * float(np.median(np.abs(times - median)))  # (a slow stream spreads them)
-            for _, bad in (m for m in first if m[0] > limit):
-                self.dropped_ahead[bad.sensor] += 1
-            first = [m for m in first if m[0] <= limit]
+            # one far after the others is a bad stamp when the old clock went on after it (leap_confirm messages
+            # or more, as for a leap below); else it is held as a leap after the others, for the messages that
+            # follow to confirm (recordings of a few messages each, read as one: the second starts a jump) or refute
+            late = [k for k, m in enumerate(first) if m[0] > limit]
+            ahead = []
+            for k in late:
+                if sum(m[0] <= limit for m in first[k + 1:]) >= self.leap_confirm:
+                    self.dropped_ahead[first[k][1].sensor] += 1
+                else:
+                    ahead.append(first[k])
+            first = [m for m in first if m[0] <= limit] + ahead
         for t, record in itertools.chain(first, rest):
             sensors.add(record.sensor)
             if newest is not None and t > newest + leap:
