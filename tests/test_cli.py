@@ -77,6 +77,23 @@ def test_view_draws_the_scans_where_the_laser_saw_them(shared_data, tmp_path):
     assert yellow.sum() > 100
 
 
+def test_info_on_a_truncated_video_counts_the_frames_it_holds(shared_data, tmp_path):
+    """A video cut at half its bytes (a copy interrupted) still states 795 frames in its header; info reports the
+    frames that decode, as tracking will meet them, and the stated count beside them."""
+    from fusiontrack.io.video import VideoReader
+
+    video = shared_data / "video/pets09_s2l1/vtest_pets09_s2l1_480x360.avi"
+    cut = tmp_path / "cut.avi"
+    cut.write_bytes(video.read_bytes()[: video.stat().st_size // 2])
+    out = json.loads(run("info", str(cut), "--json").stdout)
+    with VideoReader(cut) as reader:
+        decoded = sum(1 for _ in reader)
+    assert 0 < decoded < 795
+    assert out["frames"] == decoded
+    assert out["frames_stated"] == 795
+    assert abs(out["duration_s"] - decoded / out["fps"]) < 1e-9
+
+
 def test_view_of_a_real_rgbd_bag_shows_the_image(shared_data, tmp_path):
     bag = shared_data / "rgbd/tue_rgbd_people/2019-05-03-12-42-34.bag"
     run("view", str(bag), "-o", str(tmp_path / "v.mp4"))

@@ -114,8 +114,14 @@ def describe_video(path: Path) -> dict[str, Any]:
     from .io.video import VideoReader
 
     with VideoReader(path) as video:
-        return {"kind": "video", "paths": [str(path)], "frames": video.frame_count, "fps": video.fps,
-                "width": video.width, "height": video.height, "duration_s": video.duration_s}
+        frames = video.count_decodable()
+        out = {"kind": "video", "paths": [str(path)], "frames": frames, "fps": video.fps,
+               "width": video.width, "height": video.height, "duration_s": frames / video.fps}
+        if frames != video.frame_count:
+            out["frames_stated"] = video.frame_count
+            log.warning("%s: %d of the %d frames the container states can be decoded (a truncated file?)", path,
+                        frames, video.frame_count)
+        return out
 
 
 def describe_imu_csv(path: Path) -> dict[str, Any]:

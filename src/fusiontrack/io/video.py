@@ -214,6 +214,24 @@ class VideoReader:
     def __len__(self) -> int:
         return self._frame_count
 
+    def count_decodable(self) -> int:
+        """The frames that can be decoded: :attr:`frame_count` when the container's last frame decodes (one seek),
+        else counted by decoding from the start (a truncated file: the container states the frames it was meant
+        to hold)."""
+        cap = self._open()
+        try:
+            with _native_stderr_off():  # (FFmpeg complains on stderr of a seek into a damaged stream)
+                cap.set(cv2.CAP_PROP_POS_FRAMES, self._frame_count - 1)
+                if cap.grab():
+                    return self._frame_count
+                cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
+                n = 0
+                while cap.grab():
+                    n += 1
+            return n
+        finally:
+            self._release(cap)
+
     # -- decoding ---------------------------------------------------------------------------------
 
     def _open(self) -> cv2.VideoCapture:
