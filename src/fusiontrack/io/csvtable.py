@@ -143,7 +143,10 @@ def read_numeric_table(
         skipped = [lineno for lineno, _ in bad]
         drop = set(skipped)
         rows = [(lineno, line) for lineno, line in rows if lineno not in drop]
-        values, ints = _parse(rows, n_cols, int_cols)
+        try:
+            values, ints = _parse(rows, n_cols, int_cols)
+        except ValueError as again:  # (numpy refused what the row-by-row check let through)
+            raise RecordingError(f"{path}: cannot be parsed as {what}: {again}") from again
         shown = ", ".join(str(lineno) for lineno in skipped[:5]) + (", ..." if len(skipped) > 5 else "")
         log.warning("%s: skipped %d bad row(s) of %d (line %s); the first: %s", path, len(bad),
                     len(rows) + len(bad), shown, bad[0][1])
