@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import _jit
 from .walking import PHI, STATE_DIM, STRIDE, predicted_feet_distance
 
 __all__ = [
@@ -99,6 +100,13 @@ def laser_log_likelihood_cols(cols: np.ndarray, feet_obs: np.ndarray, inter_feet
             sd = np.where(missing, 0.0, sd)
     else:
         any_missing = np.count_nonzero(missing) > 0
+    if _jit.ENABLED and cols.dtype == np.float64 and cols.flags.c_contiguous:
+        out = np.empty(cols.shape[1:])
+        prm = np.array([1.0 / (2.0 * sigma_f**2), 1.0 / (2.0 * sigma_f_one**2), 1.0 / (2.0 * sigma_w**2), kappa,
+                        lateral_m])
+        _jit.laser_ll(cols, np.ascontiguousarray(f), np.ascontiguousarray(sd), np.ascontiguousarray(one),
+                      np.ascontiguousarray(missing, dtype=bool), prm, out)
+        return out
     any_one = np.count_nonzero(one) > 0
 
     # The four squared foot-to-barycentre distances in one pass, each |p - f|² = dx² + dy² as written out:

@@ -17,6 +17,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from . import _jit
+
 __all__ = [
     "effective_sample_size",
     "max_weight_cluster_mean",
@@ -154,6 +156,11 @@ def reweight(weights: np.ndarray, log_likelihood: np.ndarray) -> tuple[np.ndarra
     weights, degenerate : see :func:`normalise_log_weights`.
     """
     w = _check_weights(weights)
+    if (_jit.ENABLED and w.ndim == 2 and isinstance(log_likelihood, np.ndarray) and log_likelihood.shape == w.shape
+            and log_likelihood.dtype == np.float64):
+        out = np.empty(w.shape)
+        if _jit.reweight(np.ascontiguousarray(w), np.ascontiguousarray(log_likelihood), out):
+            return out, np.zeros(w.shape[0], bool)
     if np.count_nonzero(w) == w.size:  # the usual case: no zero weight, no log(0) to silence (errstate costs µs)
         lw = np.log(w)
     else:
@@ -341,9 +348,31 @@ def resample_where_cols(cols: np.ndarray, weights: np.ndarray, mask: np.ndarray,
     sel = np.asarray(mask, dtype=bool)
     if sel.shape != (w.shape[0],):
         raise ValueError(f"mask: expected shape ({w.shape[0]},), got {sel.shape}")
+    if _jit.ENABLED and cols.dtype == np.float64:
+        n_sel = np.count_nonzero(sel)
+        if not n_sel:
+            return cols.copy(), w.copy()
+        n_p = w.shape[1]
+        if u0 is None:
+            u, div = _check_rng(rng).random(n_sel), float(n_p)
+        else:
+            u, div = np.ascontiguousarray(_offsets(n_sel, n_p, None, u0)), 1.0
+        out_cols, out_w = np.empty_like(cols, order="C"), np.empty(w.shape)
+        if _jit.resample(np.ascontiguousarray(cols), np.ascontiguousarray(w), np.ascontiguousarray(sel), u, div,
+                         out_cols, out_w):
+            return out_cols, out_w
+        # (negative weights: numpy's path, with the offsets drawn, raises as it did)
+        return _resample_cols_numpy(cols, w, sel, u / div)
     flat = _resample_flat(w, sel, rng, u0)
     if flat is None:
         return cols.copy(), w.copy()
+    d = cols.shape[0]
+    return np.take(cols.reshape(d, -1), flat, axis=1).reshape(cols.shape), _resampled_weights(w, sel)
+
+
+def _resample_cols_numpy(cols: np.ndarray, w: np.ndarray, sel: np.ndarray, u0: np.ndarray) -> tuple[np.ndarray,
+                                                                                                np.ndarray]:
+    flat = _resample_flat(w, sel, None, u0)
     d = cols.shape[0]
     return np.take(cols.reshape(d, -1), flat, axis=1).reshape(cols.shape), _resampled_weights(w, sel)
 

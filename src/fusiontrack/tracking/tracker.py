@@ -102,7 +102,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..types import Detection, Event, ObjectClass, Situation, TrackState
-from . import kalman
+from . import _jit, kalman
 from .association import association_states, gate_distances, hungarian
 from .likelihood import laser_log_likelihood_cols
 from .pf import resample_where_cols, reweight, standard_normal
@@ -1172,12 +1172,26 @@ class LaserPeopleTracker:
         whose reduction over its outer axis adds them in order (the sums ``einsum("tp,tpk->tk")`` makes of the
         row layout, bit for bit; a reduction along a contiguous axis would sum pairwise).
         """
+        if _jit.ENABLED:
+            out = np.empty((self._w.shape[0], 2))
+            _jit.centres(self._x, self._w, out)
+            return out
         if mid is None:
             mid = self._feet_sums()
         w = self._w
         prod = np.empty((w.shape[1], w.shape[0], 2))
         np.multiply(w.T[:, :, None], mid.transpose(2, 1, 0), out=prod)
         return 0.5 * np.add.reduce(prod, axis=0)
+
+    def _ll_params(self) -> np.ndarray:
+        """The likelihood's constants for :func:`_jit.update`: 1/(2σ_f²), 1/(2σ_f,one²), 1/(2σ_w²), κ, lateral."""
+        p = self.params
+        cached = self.__dict__.get("_llp")
+        if cached is None or cached[0] is not p:
+            prm = np.array([1.0 / (2.0 * p.sigma_f_m**2), 1.0 / (2.0 * p.sigma_f_one_m**2),
+                            1.0 / (2.0 * p.sigma_w_m**2), p.kappa, p.lateral_m])
+            cached = self.__dict__["_llp"] = (p, prm)
+        return cached[1]
 
     def _feet_sums(self) -> np.ndarray:
         """``left + right`` foot position of every particle, ``(2, n_t, n_p)``."""
@@ -1189,7 +1203,8 @@ class LaserPeopleTracker:
         merged = self._merged
         n_w, n_m, n_d = self._id.size, len(merged), len(det)
         n_t = n_w + n_m
-        mid = self._feet_sums()  # the particles do not move until the resampling (but for a re-acquisition)
+        # the particles do not move until the resampling (but for a re-acquisition)
+        mid = None if _jit.ENABLED else self._feet_sums()
         cw = self._walking_centres(mid)
         if n_m:
             centres = np.concatenate([cw, np.array([m.x[0:2] for m in merged])])
@@ -1239,13 +1254,28 @@ class LaserPeopleTracker:
         # ---- walking targets that found nothing may re-acquire an unclaimed detection nearby
         lost = (c[:n_w] == 0).nonzero()[0]
         if lost.size and n_d and not _all(claimed) and self._reacquire(lost, cw, det, claimed, assigned, t_ns):
-            mid = self._feet_sums()  # some targets restarted: new particles
+            mid = None if _jit.ENABLED else self._feet_sums()  # some targets restarted: new particles
 
         # ---- walking targets: B9 likelihood with the assigned detection, resample (X1, B10)
         aw = assigned[:n_w]
         upd = aw >= 0
         n_upd = np.count_nonzero(upd)
-        if n_upd:
+        if n_upd and _jit.ENABLED and self._extra_ll is None:
+            # one kernel: likelihood, reweight, centres, resampling (the resampling's uniforms drawn first: nothing
+            # else draws in between)
+            u = self.rng.random(n_upd)
+            x, w = self._x, self._w
+            ll, w_new, out_w, pos = np.empty(w.shape), np.empty(w.shape), np.empty(w.shape), np.empty((n_w, 2))
+            out_x = np.empty_like(x)
+            if _jit.update(x, w, det.feet, det.inter_feet, det.one_foot, aw, u, self._ll_params(), ll, w_new,
+                           out_x, out_w, pos):
+                self._x, self._w = out_x, out_w
+            else:  # numpy's general reweight (a row with no finite log-weight), then the same resampling
+                self._w, _ = reweight(w, ll)
+                pos = self._walking_centres(None)
+                self._x, self._w = resample_where_cols(x, self._w, upd, u0=u / p.n_particles)
+            self._seen[upd] = t_ns
+        elif n_upd:
             if n_upd == n_w:  # every walking target has a detection
                 feet, sd, one, missing = det.feet[aw], det.inter_feet[aw], det.one_foot[aw], np.zeros(n_w, bool)
             else:  # the others' rows: zeros, flagged missing (log-likelihood 0)
@@ -1800,6 +1830,8 @@ class LaserPeopleTracker:
         p = self.params
         if self._id.size == 0:
             return
+        if _jit.ENABLED and self._track_velocity_jit(pos, dt):
+            return
         self._pos = pos
         if dt > 0:
             a = 1.0 - math.exp(-dt / p.velocity_tau_s)
@@ -1830,6 +1862,40 @@ class LaserPeopleTracker:
                     self._x[PSI, :, start:start + k] = psi
                 else:
                     self._x[PSI, rows, start:start + k] = psi
+
+    def _track_velocity_jit(self, pos: np.ndarray, dt: float) -> bool:
+        """:meth:`_track_velocity` by two kernels (the same draws); False (nothing changed) when a target starts
+        walking again this step (its heading is drawn by ``Generator.standard_normal``: the numpy code does it)."""
+        p = self.params
+        n = self._id.size
+        pos = np.ascontiguousarray(pos, dtype=np.float64)
+        if dt > 0:
+            a = 1.0 - math.exp(-dt / p.velocity_tau_s)
+            lag_s = dt * (1.0 - a) / a
+            vel = np.empty((n, 2))
+        else:
+            a = lag_s = 1.0
+            vel = np.array(self._vel, dtype=np.float64)  # (not written)
+        lag = self._lag if self._lag.flags.c_contiguous and self._lag.dtype == np.float64 else np.array(self._lag)
+        lag_before = lag.copy()
+        speed, slow, standing, rows = np.empty(n), np.empty(n, np.int64), np.empty(n, bool), np.empty(n, np.int64)
+        reseed = p.reseed_fraction > 0 and dt > 0
+        n_started, n_rows = _jit.track_velocity(pos, lag, vel, np.ascontiguousarray(self._slow, dtype=np.int64),
+                                                np.ascontiguousarray(self._standing), float(dt), a, lag_s,
+                                                float(p.standing_speed_mps), float(p.resume_speed_mps),
+                                                int(p.standing_frames), reseed, speed, slow, standing, rows)
+        if n_started:
+            lag[...] = lag_before  # undo: the numpy code runs this step
+            return False
+        self._pos, self._lag, self._vel, self._slow, self._standing = pos, lag, vel, slow, standing
+        if n_rows:
+            n_p = p.n_particles
+            k = max(1, round(p.reseed_fraction * n_p))
+            start = self._reseed_at
+            self._reseed_at = (start + k) % max(n_p - k + 1, 1)
+            u = self.rng.random(2 * ((n_rows * k + 1) // 2))
+            _jit.reseed_heading(self._x, rows, n_rows, vel, u, float(p.init_heading_sigma_rad), start, k)
+        return True
 
     def _new_walker(self, tid: int, det: DetectionArrays, j: int, v0: np.ndarray, heading: float, t_ns: int, *,
                     period_s: float = 1.1, stride_m: float | None = None, standing: bool | None = None,

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _jit
 from .pf import standard_normal
 
 __all__ = [
@@ -427,6 +428,8 @@ def predict_people_cols(cols: np.ndarray, standing: np.ndarray, dt_s: float, rng
         A new C-contiguous array.
     """
     n_s = np.count_nonzero(standing)
+    if _jit.ENABLED and cols.dtype == np.float64 and cols.flags.c_contiguous and cols.ndim == 3:
+        return _predict_people_jit(cols, standing, n_s, dt_s, rng, noise, standing_noise)
     if not n_s:
         out = cols.copy()
         _walk_cols(out.reshape(STATE_DIM, -1), dt_s, rng, noise)
@@ -439,6 +442,31 @@ def predict_people_cols(cols: np.ndarray, standing: np.ndarray, dt_s: float, rng
     out[:, ~standing] = walk
     out[:, standing] = _stand_cols(cols[:, standing], dt_s, rng, standing_noise)
     return out
+
+
+def _predict_people_jit(cols: np.ndarray, standing: np.ndarray, n_s: int, dt_s: float, rng: np.random.Generator,
+                        noise: WalkingNoise | None, standing_noise: StandingNoise | None) -> np.ndarray:
+    """:func:`predict_people_cols` by one numba kernel; the uniforms drawn here, as the numpy path draws them."""
+    n_t, n_p = cols.shape[1], cols.shape[2]
+    n_w = n_t - n_s
+    nz = WalkingNoise() if noise is None else noise
+    sig = _walking_sigmas(nz, nz.scale(dt_s))
+    walk_noise = n_w > 0 and np.count_nonzero(sig) > 0
+    n_draw = (STATE_DIM * n_w * n_p if walk_noise else 0) + STATE_DIM * n_s * n_p
+    u = _check_rng(rng).random(n_draw) if n_draw else _NO_UNIFORMS
+    if n_s:
+        snz = StandingNoise() if standing_noise is None else standing_noise
+        k = snz.scale(dt_s)
+        ssig = np.array([k * snz.foot_m, k * snz.body_m, k * snz.heading_rad, k * snz.phase_rad])
+    else:
+        ssig = _NO_SSIG
+    out = np.empty_like(cols)
+    _jit.predict_people(cols, np.ascontiguousarray(standing, dtype=bool), u, sig, walk_noise, ssig, float(dt_s), out)
+    return out
+
+
+_NO_UNIFORMS = np.zeros(0)
+_NO_SSIG = np.zeros(4)
 
 
 def update_standing(speed_mps: np.ndarray, slow_frames: np.ndarray, standing: np.ndarray,
