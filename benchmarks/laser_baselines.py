@@ -8,7 +8,9 @@ per scan time and the very same :class:`~fusiontrack.types.Detection` objects ar
 
 - ``CV Kalman``: :class:`fusiontrack.tracking.baseline.CVKalmanTracker` with its defaults;
 - ``PF (ours)``: :class:`fusiontrack.tracking.tracker.LaserPeopleTracker` (``lateral_m`` 0.2, as in
-  ``laser_people.py``);
+  ``laser_people.py``), and the same with its particle-filter step in numpy (``PF (ours), numpy step``: the
+  reference code the numba kernels of ``tracking/_jit.py`` replace; the runs differ in the particles' draws, so
+  identities may differ too);
 - ``Stone Soup``: ``MultiTargetTracker`` built as the Stone Soup tutorials build a GNN + Kalman tracker
   (``ConstantVelocity`` x 2, ``LinearGaussian`` on (x, y), ``KalmanPredictor``, ``KalmanUpdater``,
   ``DistanceHypothesiser`` with ``Mahalanobis``, ``GNNWith2DAssignment``, ``MultiMeasurementInitiator``,
@@ -37,11 +39,12 @@ simulator.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime
 import math
 import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -55,14 +58,16 @@ from fusiontrack.io.sync import synchronize
 from fusiontrack.laser.detector import detector_for_recording
 from fusiontrack.sim.scenario import load_scenario
 from fusiontrack.sim.simulator import Simulation, simulate
+from fusiontrack.tracking import _jit
 from fusiontrack.tracking.baseline import CVKalmanTracker
 from fusiontrack.tracking.tracker import LaserPeopleTracker
 from fusiontrack.types import Detection, GroundTruth, TrackState
 
 SIM_PF = {"lateral_m": 0.2}  # the simulator's feet are 0.2 m apart side by side
 MATCH_M = 0.5
-TRACKERS = ("kalman", "pf", "stonesoup")
-LABELS = {"kalman": "CV Kalman (ours)", "pf": "PF (ours)", "stonesoup": "Stone Soup GNN"}
+TRACKERS = ("kalman", "pf", "pf_numpy", "stonesoup")
+LABELS = {"kalman": "CV Kalman (ours)", "pf": "PF (ours)", "pf_numpy": "PF (ours), numpy step",
+          "stonesoup": "Stone Soup GNN"}
 EPOCH = datetime.datetime(1970, 1, 1)
 Frames = list[tuple[int, list[Detection]]]
 
@@ -102,6 +107,17 @@ def detect_recording(path: Path, clock_corrections_ns: dict[str, int]) -> Frames
         if pending_t is not None:
             frames.append((pending_t, detector.detect(pending_t)))
     return frames
+
+
+@contextlib.contextmanager
+def numpy_step() -> Iterator[None]:
+    """The laser tracker's particle-filter step in numpy (its reference code), not by the numba kernels."""
+    was = _jit.ENABLED
+    _jit.ENABLED = False
+    try:
+        yield
+    finally:
+        _jit.ENABLED = was
 
 
 def replay(step: Callable[[int, list[Detection]], list[TrackState]], frames: Frames
@@ -224,6 +240,8 @@ def run_case(name: str, seconds: float, seed: int, tmp: Path, ss: dict[str, Any]
         "kalman": replay(CVKalmanTracker(area_m=bounds).step, frames),
         "pf": replay(LaserPeopleTracker(SIM_PF, area_m=bounds, rng=0).step, frames),
     }
+    with numpy_step():  # the same tracker with its particle-filter step in numpy, not compiled (tracking/_jit.py)
+        runs["pf_numpy"] = replay(LaserPeopleTracker(SIM_PF, area_m=bounds, rng=0).step, frames)
     ss_states, ss_seconds, out["ss_notes"] = run_stone_soup(frames, **ss)
     runs["stonesoup"] = (ss_states, ss_seconds)
     for trk, (states, secs) in runs.items():
@@ -293,6 +311,9 @@ def main() -> None:
                 verdicts[trk].append(ok)
                 console.print(f"  {LABELS[trk]}: {ratio:.1f}x faster than Stone Soup (median ms/scan), MOTA "
                               f"{mean_mota[trk]:.3f} vs {mean_mota['stonesoup']:.3f}: {'PASS' if ok else 'FAIL'}")
+            console.print(f"  PF step compiled (numba) vs numpy: {mean_med['pf_numpy'] / mean_med['pf']:.2f}x faster "
+                          f"(median ms/scan {mean_med['pf']:.3f} vs {mean_med['pf_numpy']:.3f})"
+                          + ("" if _jit.ENABLED else " [numba off: both numpy]"))
     for trk in ("kalman", "pf"):
         ok = all(verdicts[trk])
         console.print(f"[bold]verdict: {LABELS[trk]} is {'' if ok else 'NOT '}>= 10x faster than Stone Soup at >= "
