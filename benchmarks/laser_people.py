@@ -44,12 +44,12 @@ Tables, all measured in this process, one run after another (no parallel load on
 
 The particle filters' random draws (``--rng``, default 0) move the situation counts by an event or two: merges
 detected (crowd, measurement truth as labelled, seeds 0-2) 42 / 42 / 41 / 42 of 47 with rng 0 / 1 / 2 / 3, splits
-45 / 45 / 45 / 46 of 50 (with the particle-filter step in numpy, ``FUSIONTRACK_NUMBA=0``: 42 / 42 / 43 / 43 and
-45 / 43 / 45 / 46). Four of the five merges missed with rng 0 are missed with every draw (crowd 0 at 25.1 s and
-26.1 s, in a cluster of three walking abreast whose measurement truth counts a merge of all three and, 30 ms later,
-one of two of them; crowd 2 at 8.1 s and 15.4 s). In groups, identities are a lottery at the close encounters: over
-rng 0-11, 4 (numpy step) and 8 (numba) of 36 runs have ID switches (IDF1 0.77-0.89), the others none; rng 0 with
-the numba step draws two of them (seeds 0 and 1).
+45 / 45 / 45 / 46 of 50 (with the particle-filter step in numpy, ``FUSIONTRACK_NUMBA=0``: 42 / 42 / 43 / 43 and 45
+/ 43 / 45 / 46). Four of the five merges missed with rng 0 are missed with every draw (crowd 0 at 25.1 s, three
+walking abreast 0.5 m apart, whose measurement truth counts a merge of all three and, 30 ms later, one of two of
+them, and at 26.1 s, a walker passing a standing person at 0.6 m; crowd 2 at 8.1 s and 15.4 s). In groups,
+identities are a lottery at the close encounters: over rng 0-11, 4 (numpy step) and 8 (numba) of 36 runs have ID
+switches (IDF1 0.77-0.89), the others none; rng 0 with the numba step draws two of them (seeds 0 and 1).
 
     .venv/bin/python benchmarks/laser_people.py [--seeds 0 1 2] [--crowd-seconds 60] [--groups-seconds 40]
         [--scaling 5 10 20 40 80] [--scaling-seconds 20] [--skip-scaling] [--skip-outdoor] [--skip-road] [--skip-kalman]
