@@ -48,7 +48,7 @@ detected (crowd, measurement truth as labelled, seeds 0-2) 42 / 42 / 41 / 42 of 
 / 43 / 45 / 46). Four of the five merges missed with rng 0 are missed with every draw (crowd 0 at 25.1 s, three
 walking abreast 0.5 m apart, whose measurement truth counts a merge of all three and, 30 ms later, one of two of
 them, and at 26.1 s, a walker passing a standing person at 0.6 m; crowd 2 at 8.1 s and 15.4 s). In groups,
-identities are a lottery at the close encounters: over rng 0-11, 4 (numpy step) and 8 (numba) of 36 runs have ID
+identities are a lottery at the close encounters: over rng 0-23, 10 (numpy step) and 14 (numba) of 72 runs have ID
 switches (IDF1 0.77-0.89), the others none; rng 0 with the numba step draws two of them (seeds 0 and 1).
 
     .venv/bin/python benchmarks/laser_people.py [--seeds 0 1 2] [--crowd-seconds 60] [--groups-seconds 40]
