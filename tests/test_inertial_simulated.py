@@ -238,6 +238,27 @@ def test_pdr_from_csv_and_from_recording_agree(tmp_path: Path) -> None:
     assert stream.t_ns.size == walk.t_ns.size
 
 
+def test_a_recording_with_nan_imu_messages_loses_only_them(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """Three messages of a recorded phone carry NaN (a glitch) and one a NaN gyroscope: they are dropped with a
+    warning, and dead reckoning still finds every heel strike of the simulated walk (one NaN refused the whole
+    recording before)."""
+    walk, accel, gyro = _walk_and_phone()
+    accel, gyro = accel.copy(), gyro.copy()
+    accel[[400, 900, 1400], 1] = np.nan
+    gyro[1800, 2] = np.nan
+    samples = [ImuSample(int(t), "phone", "phone", a, g) for t, a, g in zip(walk.t_ns, accel, gyro, strict=True)]
+    write_recording(tmp_path / "walk_bag", samples)
+    with caplog.at_level("WARNING"):
+        stream = load_imu(tmp_path / "walk_bag")
+        result = pdr_from_file(tmp_path / "walk_bag")
+    assert stream.t_ns.size == walk.t_ns.size - 4
+    assert np.isfinite(stream.accel_mps2).all()
+    assert np.isfinite(stream.gyro_radps).all()
+    assert "non-finite acceleration" in caplog.text
+    assert "non-finite gyroscope" in caplog.text
+    assert result.n_steps == walk.strikes_ns.size
+
+
 def test_write_pdr_round_trip(tmp_path: Path) -> None:
     walk, accel, gyro = _walk_and_phone()
     result = run_pdr(walk.t_ns, accel, gyro)
