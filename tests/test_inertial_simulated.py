@@ -259,6 +259,19 @@ def test_a_recording_with_nan_imu_messages_loses_only_them(tmp_path: Path, caplo
     assert result.n_steps == walk.strikes_ns.size
 
 
+def test_a_phone_with_a_nan_message_keeps_its_dead_reckoning_in_the_wearable_pipeline() -> None:
+    """The wearable pipeline dead-reckons each phone (fusion/wearable_data.py): a NaN message gave the phone no
+    trajectory at all; now it costs that sample, and the steps are the walk's heel strikes."""
+    from fusiontrack.fusion.wearable_data import dead_reckon_phone
+
+    walk, accel, gyro = _walk_and_phone()
+    accel = accel.copy()
+    accel[700, 2] = np.nan
+    track = dead_reckon_phone("phone_a", walk.t_ns, accel, gyro)
+    assert track.ok, track.error
+    assert track.pdr.n_steps == walk.strikes_ns.size
+
+
 def test_write_pdr_round_trip(tmp_path: Path) -> None:
     walk, accel, gyro = _walk_and_phone()
     result = run_pdr(walk.t_ns, accel, gyro)

@@ -104,32 +104,33 @@ def load_imu(path: str | Path, *, sensor: str | None = None) -> ImuStream:
         log.info("%s: IMU header stamps out of log order; sorted", path)
     accel = np.stack([s.accel_mps2 for s in samples])[order]
     gyro = np.stack([s.gyro_radps for s in samples])[order]
-    t, accel, gyro = _usable(path, t[order], accel, gyro)
+    t, accel, gyro = drop_unusable_imu(str(path), t[order], accel, gyro)
+    if t.size < 2:
+        raise RecordingError(f"{path}: {t.size} IMU message(s) with a finite acceleration; need at least 2")
     return ImuStream(t, accel, gyro, str(path), name)
 
 
-def _usable(path: Path, t: np.ndarray, accel: np.ndarray, gyro: np.ndarray
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def drop_unusable_imu(where: str, t: np.ndarray, accel: np.ndarray, gyro: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A recording's IMU samples as the CSV reader leaves them (fusiontrack.io.imu_csv): a message with a
-    non-finite acceleration is dropped, with a warning; so is one whose gyroscope is non-finite while most are
-    not; a gyroscope missing from most messages is not used. (Before, one NaN message refused the recording.)"""
+    non-finite acceleration is dropped, with a warning naming ``where``; so is one whose gyroscope is non-finite
+    while most are not; a gyroscope missing from most messages is not used (all NaN). One NaN message must not
+    cost the phone's dead reckoning."""
     ok = np.isfinite(accel).all(axis=1)
     if not ok.all():
-        log.warning("%s: dropped %d IMU message(s) with a non-finite acceleration (of %d)", path,
+        log.warning("%s: dropped %d IMU message(s) with a non-finite acceleration (of %d)", where,
                     np.count_nonzero(~ok), ok.size)
         t, accel, gyro = t[ok], accel[ok], gyro[ok]
     has = np.isfinite(gyro).all(axis=1)
     if has.any() and not has.all():
         if np.count_nonzero(~has) <= has.size // 2:
-            log.warning("%s: dropped %d IMU message(s) with a non-finite gyroscope (of %d)", path,
+            log.warning("%s: dropped %d IMU message(s) with a non-finite gyroscope (of %d)", where,
                         np.count_nonzero(~has), has.size)
             t, accel, gyro = t[has], accel[has], gyro[has]
         else:
             log.warning("%s: the gyroscope is missing (non-finite) from %d of %d IMU messages; it is not used",
-                        path, np.count_nonzero(~has), has.size)
+                        where, np.count_nonzero(~has), has.size)
             gyro = np.full_like(gyro, np.nan)
-    if t.size < 2:
-        raise RecordingError(f"{path}: {t.size} IMU message(s) with a finite acceleration; need at least 2")
     return t, accel, gyro
 
 
