@@ -38,19 +38,20 @@ the CPU time of the set-up and the bias pass (up to the fused tracker's first st
 With ``--repeat N`` each system runs N times, the three interleaved, and the least CPU time counts (the tracks do
 not change from one repeat to the next): a burst of load from another job then inflates no ratio.
 
-Identity figures swing from run to run: on the same 30 s scenes one change to the fused tracker often turns a few
-ID switches up in one run and down in another, and 24 paired runs have pointed the wrong way (score maps: 54 ID
-switches against 50 without over crowd + groups seeds 0-11). The trackers' own random draws (``--rng``, the
-particle filters' seed; default 0) move even the 72-run totals (crowd + groups, seeds 0-35, 30 s). Since the
-identity checks date an exchange at the tracks' closest approach and need both classifiers to exchange
+Identity figures swing from run to run: on the same 30 s scenes one change to the fused tracker often turns a few ID
+switches up in one run and down in another, and 24 paired runs have pointed the wrong way (score maps: 54 ID
+switches against 50 without over crowd + groups seeds 0-11). The trackers' own random draws (``--rng``, the particle
+filters' seed; default 0) move even the 72-run totals (crowd + groups, seeds 0-35, 30 s). Since the identity checks
+date an exchange at the tracks' closest approach and need both classifiers to exchange
 (``FusionParams.check_voters``), over rng 0-3: fusion crowd 64 / 81 / 65 / 78 and groups 21 / 20 / 35 / 28 ID
-switches, groups IDF1 0.970 / 0.974 / 0.961 / 0.968; with the checks off 65 / 81 / 64 / 79 and 21 / 26 / 31 / 30,
-IDF1 0.966 / 0.961 / 0.953 / 0.960; as the checks were before, 66 / 83 / 67 / 78 and 31 / 32 / 39 / 32, IDF1
-0.966 / 0.973 / 0.959 / 0.967 (laser-only, rng 0 / 1: crowd 66 / 82, groups 21 / 26). Since the laser
-tracker splits a merged target seen apart (score maps then off by default): fusion 172 / 185 ID switches with
-rng 0 / 1, laser-only 169 / 184 (with the maps: 210 / 201). Before: fusion 242 / 218 / 252 / 245 with rng 0-3,
-laser-only 262 / 239 / 247 / 259; and one scene alone, groups seed 0, scored laser-only IDF1 0.78 to 0.99 over
-rng 0-9 (0.80 to 0.99 after; its failure was two people standing 0.6 m apart, see
+switches, groups IDF1 0.970 / 0.974 / 0.961 / 0.968 (these figures with the particle-filter step in numpy,
+``FUSIONTRACK_NUMBA=0``; with the compiled step, rng 0: crowd 66, groups 21, groups IDF1 0.971); with the checks off
+65 / 81 / 64 / 79 and 21 / 26 / 31 / 30, IDF1 0.966 / 0.961 / 0.953 / 0.960; as the checks were before, 66 / 83 / 67
+/ 78 and 31 / 32 / 39 / 32, IDF1 0.966 / 0.973 / 0.959 / 0.967 (laser-only, rng 0 / 1: crowd 66 / 82, groups 21 /
+26). Since the laser tracker splits a merged target seen apart (score maps then off by default): fusion 172 / 185 ID
+switches with rng 0 / 1, laser-only 169 / 184 (with the maps: 210 / 201). Before: fusion 242 / 218 / 252 / 245 with
+rng 0-3, laser-only 262 / 239 / 247 / 259; and one scene alone, groups seed 0, scored laser-only IDF1 0.78 to 0.99
+over rng 0-9 (0.80 to 0.99 after; its failure was two people standing 0.6 m apart, see
 :class:`~fusiontrack.tracking.LaserPeopleTracker`).
 Judge a change to the identities on many seeds and more than one ``--rng``; ``--skip-camera`` leaves camera-only
 out (its columns and its target then say so), which halves the time of such a run, e.g. ``--seeds $(seq 0 35)
