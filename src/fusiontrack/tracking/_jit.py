@@ -300,8 +300,8 @@ if ENABLED:
     def resample(cols, w, sel, u, div, out_cols, out_w):
         return _resample_rows(cols, w, sel, u, div, out_cols, out_w)
 
-    @njit(cache=True)
-    def centres(cols, w, out):
+    @njit(cache=True, inline="always")
+    def _centres(cols, w, out):
         """``_walking_centres``: ``0.5 Σ_p w_tp (left + right)_tp``, summed particle after particle."""
         n_t = cols.shape[1]
         n_p = cols.shape[2]
@@ -313,6 +313,10 @@ if ENABLED:
                 sy += w[t, p] * (cols[1, t, p] + cols[3, t, p])
             out[t, 0] = 0.5 * sx
             out[t, 1] = 0.5 * sy
+
+    @njit(cache=True)
+    def centres(cols, w, out):
+        _centres(cols, w, out)
 
     @njit(cache=True)
     def update(cols, w, det_feet, det_sd, det_one, aw, u, prm, ll, w_new, out_cols, out_w, pos):
@@ -333,15 +337,7 @@ if ENABLED:
                                    det_feet[j, 1, 1], det_sd[j], det_one[j], prm[0], prm[1], prm[2], prm[3], prm[4])
         if not _reweight_rows(w, ll, w_new):
             return False
-        n_t = cols.shape[1]
-        for t in range(n_t):
-            sx = w_new[t, 0] * (cols[0, t, 0] + cols[2, t, 0])
-            sy = w_new[t, 0] * (cols[1, t, 0] + cols[3, t, 0])
-            for p in range(1, n_p):
-                sx += w_new[t, p] * (cols[0, t, p] + cols[2, t, p])
-                sy += w_new[t, p] * (cols[1, t, p] + cols[3, t, p])
-            pos[t, 0] = 0.5 * sx
-            pos[t, 1] = 0.5 * sy
+        _centres(cols, w_new, pos)
         sel = aw >= 0
         return _resample_rows(cols, w_new, sel, u, float(n_p), out_cols, out_w)  # (True: the weights are >= 0)
 
