@@ -88,3 +88,92 @@ def test_reweight_and_resample_match_numpy(numpy_path):
     assert da[1]
 
 
+
+
+def test_reweight_of_a_weight_of_minus_one_matches_numpy(numpy_path):
+    # (the kernel's "no log taken yet" marker was -1.0: such a weight got log 0)
+    w = np.array([[-1.0, 0.5, 0.5, 1.0]])
+    a, _ = pf.reweight(w, np.zeros((1, 4)))
+    b, _ = numpy_path(pf.reweight, w, np.zeros((1, 4)))
+    np.testing.assert_array_equal(a, b)
+
+
+def test_the_kernels_clip_gait_as_the_walking_model_does():
+    assert (_jit.P_LO, _jit.P_HI) == walking.PERIOD_RANGE_S
+    assert (_jit.S_LO, _jit.S_HI) == walking.STRIDE_RANGE_M
+
+
+def test_a_flag_array_of_the_wrong_length_is_an_error_not_a_read_past_its_end():
+    cols = _cols(4)
+    with pytest.raises(ValueError, match="standing"):
+        walking.predict_people_cols(cols, np.zeros(3, bool), 0.04, np.random.default_rng(0))
+    feet = np.zeros((4, 2, 2))
+    with pytest.raises(ValueError, match="missing"):
+        laser_log_likelihood_cols(cols, feet, np.zeros(4), np.zeros(4, bool), 0.1, 0.12, missing=np.zeros(2, bool))
+
+
+def _two_walkers_one_stopping(n: int = 150) -> list:
+    """Scans of two walkers, the second standing still from step 40 to 90 (the standing switch, the restart)."""
+    from test_tracking_tracker import FRAME_NS, _detection, _walk
+
+    rng = np.random.default_rng(0)
+    _, feet1 = _walk(n, np.array([2.0, 2.0]), np.zeros(n), 1.2, 1.2)
+    _, f2 = _walk(n, np.array([2.0, 6.0]), np.zeros(n), 1.0, 1.1)
+    feet2 = f2[[i if i < 40 else (40 if i < 90 else i - 50) for i in range(n)]]
+    return [((i + 1) * FRAME_NS, [_detection((i + 1) * FRAME_NS, feet1[i], rng), _detection((i + 1) * FRAME_NS,
+                                                                                           feet2[i], rng)])
+            for i in range(n)]
+
+
+def test_the_tracker_update_matches_numpy_step_by_step(monkeypatch):
+    """The update kernel (likelihood, reweight, centres, resampling), the velocity / standing kernels and their
+    numpy fall-backs, in lockstep: from the same predicted particles, each step's update by the kernels and by the
+    numpy code leaves the same tracker state and the same rng state."""
+    import copy
+
+    from fusiontrack.tracking.tracker import LaserPeopleTracker, detection_arrays
+
+    fields = ("_x", "_w", "_id", "_seen", "_pos", "_lag", "_vel", "_slow", "_standing", "_reseed_at")
+    trk = LaserPeopleTracker(rng=3, standing_speed_mps=0.3, resume_speed_mps=0.5)
+    standing_seen = False
+    for t_ns, dets in _two_walkers_one_stopping():
+        det = detection_arrays(dets)
+        dt = 0.0 if trk._t is None else min((t_ns - trk._t) / 1e9, trk.params.max_dt_s)
+        trk._t = t_ns
+        trk.events = []
+        trk._predict(dt)
+        twin = copy.deepcopy(trk)
+        trk._update(t_ns, dt, det)
+        monkeypatch.setattr(_jit, "ENABLED", False)
+        twin._update(t_ns, dt, det)
+        monkeypatch.setattr(_jit, "ENABLED", True)
+        for f in fields:
+            a, b = np.asarray(getattr(trk, f)), np.asarray(getattr(twin, f))
+            if a.dtype.kind == "f":
+                np.testing.assert_allclose(a, b, rtol=0, atol=1e-6, err_msg=f)
+            else:
+                np.testing.assert_array_equal(a, b, err_msg=f)
+        assert trk.rng.random() == twin.rng.random()  # the same draws
+        standing_seen |= bool(np.count_nonzero(trk._standing))
+    assert standing_seen  # the standing switch (and the restart after it) was exercised
+    assert trk._id.size == 2
+
+
+def test_a_long_gap_gives_no_velocity_rather_than_an_error(numpy_path):
+    """After a gap long enough that the velocity filter's gain rounds to 1, the lag is 0: the kernel raised
+    ZeroDivisionError where numpy went on (with a NaN velocity). Now both give the same, finite velocity."""
+    from fusiontrack.tracking.tracker import LaserPeopleTracker
+    from test_tracking_tracker import FRAME_NS, _detection, _walk
+
+    def run() -> np.ndarray:
+        rng = np.random.default_rng(0)
+        _, feet = _walk(40, np.array([2.0, 2.0]), np.zeros(40), 1.2, 1.2)
+        trk = LaserPeopleTracker(rng=3, max_dt_s=30.0)
+        for i in range(40):
+            t = (i + 1) * FRAME_NS + (15_000_000_000 if i >= 20 else 0)
+            trk.step(t, [_detection(t, feet[i], rng)])
+        return np.array(trk._vel)
+
+    a, b = run(), numpy_path(run)
+    assert np.isfinite(a).all()
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-6)

@@ -31,10 +31,26 @@ ENABLED = os.environ.get("FUSIONTRACK_NUMBA", "1") != "0"
 try:
     if not ENABLED:
         raise ImportError
-    from numba import njit
+    from numba import njit as _njit
 except ImportError:  # pragma: no cover
     ENABLED = False
-    njit = None
+    _njit = None
+
+
+def njit(**options):  # type: ignore[no-untyped-def]
+    """numba's ``njit`` as the kernels need it: numpy's floating-point error model (a division by zero gives inf or
+    NaN, as in the numpy code, not ``ZeroDivisionError``), and the on-disk cache when numba finds a writable place
+    for it (a read-only install with no writable cache folder compiles in every process instead of failing at
+    import)."""
+    options.setdefault("error_model", "numpy")
+
+    def wrap(fn):  # type: ignore[no-untyped-def]
+        try:
+            return _njit(**options)(fn)
+        except RuntimeError:  # "cannot cache function ...: no locator available"
+            return _njit(**{**options, "cache": False})(fn)
+
+    return wrap
 
 TWO_PI = 2.0 * np.pi
 PI = np.pi
@@ -226,7 +242,7 @@ if ENABLED:
         for t in range(n_t):
             m = -np.inf
             nan = False
-            wp = -1.0
+            wp = np.nan  # (no weight equals it: the first one takes its log)
             lg = 0.0
             for p in range(n_p):
                 if w[t, p] != wp:  # after a resampling every weight is 1/n_p: one log

@@ -99,6 +99,9 @@ def laser_log_likelihood_cols(cols: np.ndarray, feet_obs: np.ndarray, inter_feet
             f = np.where(missing[:, None, None], 0.0, f)
             sd = np.where(missing, 0.0, sd)
     else:
+        missing = np.asarray(missing, dtype=bool)
+        if missing.shape != (n_t,):  # (the kernel would read past its end)
+            raise ValueError(f"missing: expected shape ({n_t},), got {missing.shape}")
         any_missing = np.count_nonzero(missing) > 0
     if _jit.ENABLED and cols.dtype == np.float64 and cols.flags.c_contiguous:
         out = np.empty(cols.shape[1:])

@@ -1836,7 +1836,9 @@ class LaserPeopleTracker:
         if dt > 0:
             a = 1.0 - math.exp(-dt / p.velocity_tau_s)
             self._lag += a * (pos - self._lag)
-            lag_s = dt * (1.0 - a) / a  # steady-state lag of the discrete EMA behind a ramp
+            # steady-state lag of the discrete EMA behind a ramp; after a gap so long that a rounds to 1 the lagged
+            # position is the position: no velocity to tell (0, not 0 / 0)
+            lag_s = dt * (1.0 - a) / a if a < 1.0 else math.inf
             self._vel = (pos - self._lag) / lag_s
         speed = np.hypot(self._vel[:, 0], self._vel[:, 1])
         was = self._standing
@@ -1871,7 +1873,7 @@ class LaserPeopleTracker:
         pos = np.ascontiguousarray(pos, dtype=np.float64)
         if dt > 0:
             a = 1.0 - math.exp(-dt / p.velocity_tau_s)
-            lag_s = dt * (1.0 - a) / a
+            lag_s = dt * (1.0 - a) / a if a < 1.0 else math.inf  # (as in _track_velocity)
             vel = np.empty((n, 2))
         else:
             a = lag_s = 1.0

@@ -427,8 +427,11 @@ def predict_people_cols(cols: np.ndarray, standing: np.ndarray, dt_s: float, rng
     cols : (8, n_t, n_p) float64
         A new C-contiguous array.
     """
+    standing = np.asarray(standing, dtype=bool)
+    if cols.ndim != 3 or standing.shape != (cols.shape[1],):  # (the kernel would read past its end)
+        raise ValueError(f"standing: expected one flag per target of cols {cols.shape}, got shape {standing.shape}")
     n_s = np.count_nonzero(standing)
-    if _jit.ENABLED and cols.dtype == np.float64 and cols.flags.c_contiguous and cols.ndim == 3:
+    if _jit.ENABLED and cols.dtype == np.float64 and cols.flags.c_contiguous:
         return _predict_people_jit(cols, standing, n_s, dt_s, rng, noise, standing_noise)
     if not n_s:
         out = cols.copy()
