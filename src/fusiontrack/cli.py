@@ -263,7 +263,7 @@ def _check_sensor_topics(cfg: Any, config: Path | None, recordings: Sequence[Pat
     from .io.recording import Recording
 
     with Recording(recordings) as rec:
-        have = set(rec.topics())
+        have = set(rec.topic_types())  # (the names only: topics() counts the messages)
     for name, sensor in cfg.sensors.items():
         if sensor.kind not in kinds:
             continue
