@@ -171,6 +171,16 @@ def test_generic_t_ns_exact_and_column_order(tmp_path: Path) -> None:
     np.testing.assert_array_equal(imu.t_ns, t0 + np.arange(3))
     np.testing.assert_array_equal(imu.accel_mps2[:, 1], [0, 1, 2])
     assert np.isnan(imu.gyro_radps).all()
+    # a stamp written with ".0" and a NaN stamp among 300 rows: the NaN row goes, every other row keeps its own
+    # stamp (the exact re-read had dropped the ".0" row too, shifting every later stamp onto the wrong sample)
+    rows = [f"9.8,{i},0,{t0 + 10_000_000 * i}" for i in range(300)]
+    rows[100] = f"9.8,100,0,{t0 + 1_000_000_000}.0"
+    rows[200] = "9.8,200,0,nan"
+    p.write_text("az,ay,ax,t_ns\n" + "\n".join(rows) + "\n")
+    imu = read_imu_csv(p, format="generic")
+    kept = np.delete(np.arange(300), 200)
+    np.testing.assert_array_equal(imu.accel_mps2[:, 1], kept)
+    np.testing.assert_array_equal(imu.t_ns, t0 + 10_000_000 * kept)
 
 
 def test_generic_header_errors(tmp_path: Path) -> None:
@@ -225,7 +235,8 @@ def test_bad_rows_name_file_and_line(tmp_path: Path) -> None:
     p.write_text(good + "10x0,0.1,0.2,9.8,0,0,0\n" + "10y0,0.1,0.2,9.8,0,0,0\n")
     with pytest.raises(RecordingError, match=r"line 2, column 1: expected an integer"):
         read_imu_csv(p, format="oxford_validation")
-    p.write_text("2000,0.1,0.2,9.8,0,0,0\n1000,0.1,0.2,9.8,0,1,0\n1001,0.1,0.2,9.8,0,1,0\n")
+    p.write_text("2000,0.1,0.2,9.8,0,0,0\n1000,0.1,0.2,9.8,0,1,0\n1001,0.1,0.2,9.8,0,1,0\n1002,0.1,0.2,9.8,0,1,0\n"
+                 "900,0.1,0.2,9.8,0,1,0\n")
     with pytest.raises(RecordingError, match=r"line 2: time goes backwards.*\(2 rows out of order"):
         read_imu_csv(p)
     p.write_text("2000,0.1,0.2,9.8,0,0.5,0\n")
@@ -237,13 +248,23 @@ def test_bad_rows_name_file_and_line(tmp_path: Path) -> None:
 
 
 def test_a_clock_reset_is_an_error_not_a_drop(tmp_path: Path) -> None:
-    # one row 5 s back is not a message out of order but a second recording in the same file
+    # a second recording appended to the first (its clock starts again): too many rows would have to go
     p = tmp_path / "phone.csv"
-    rows = [f"{t:.2f},0,0,9.81" for t in np.arange(0, 10, 0.01)]
-    rows.insert(500, "0.00,0,0,9.81")
+    rows = [f"{t:.2f},0,0,9.81" for t in (*np.arange(0, 10, 0.01), *np.arange(0, 4, 0.01))]
     p.write_text("t_s,ax,ay,az\n" + "\n".join(rows) + "\n")
-    with pytest.raises(RecordingError, match=r"phone\.csv, line 502: time goes backwards"):
+    with pytest.raises(RecordingError, match=r"phone\.csv, line 1002: time goes backwards.*clock reset"):
         read_imu_csv(p)
+
+
+def test_one_row_stamped_ahead_costs_itself_not_the_rows_after_it(tmp_path: Path) -> None:
+    # a glitch 0.3 s ahead: every row of the next 0.3 s is "behind" it, but the row itself is the one out of order
+    p = tmp_path / "phone.csv"
+    t = np.arange(10_000) * 0.01
+    t[5000] += 0.3
+    p.write_text("t_s,ax,ay,az\n" + "\n".join(f"{x:.2f},0,0,9.81" for x in t) + "\n")
+    imu = read_imu_csv(p)
+    assert len(imu) == 9_999
+    np.testing.assert_array_equal(imu.t_ns, np.rint(np.delete(t, 5000) * 1e9).astype(np.int64))
 
 
 @needs_oxford
@@ -259,15 +280,16 @@ def test_a_damaged_real_trace_loses_only_its_bad_rows(tmp_path: Path, caplog: py
     fields[2] = "nan"
     damaged[500] = ",".join(fields)  # line 501
     damaged[900] = "garbage,,"  # line 901
-    damaged[700], damaged[701] = damaged[701], damaged[700]  # line 702 comes 10 ms before line 701
+    damaged[700], damaged[701] = damaged[701], damaged[700]  # lines 701 and 702 swapped (10 ms apart)
     damaged[-1] = damaged[-1][:15]
     p = tmp_path / "user1_frontpocket_damaged.csv"
     p.write_text("\n".join(damaged))
     with caplog.at_level("WARNING"):
         imu = read_imu_csv(p)
     warned = caplog.text
-    for what in ("line 501", "line 702", f"line 901, {len(lines)}"):
+    for what in ("line 501", f"line 901, {len(lines)}"):
         assert what in warned, what
+    assert "out of time order (line 701)" in warned or "out of time order (line 702)" in warned  # one of the two
     assert len(imu) == len(clean) - 4
     kept = np.isin(clean.t_ns, imu.t_ns)
     assert np.count_nonzero(~kept) == 4  # exactly the four damaged rows are gone

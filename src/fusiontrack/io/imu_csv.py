@@ -35,10 +35,10 @@ the first data line decides: a header with letters is ``generic``, seven numbers
 
 Bad sensor data inside a log costs only its samples, each drop a warning naming the file and line: a row cut
 short (the phone stopped mid-write) or garbled, a sample with a non-finite time or acceleration, a sample whose
-gyroscope is non-finite (or, when that is most of them, the gyroscope altogether), and a row that comes after a
-later stamp by up to :data:`MAX_BACK_S` (out of order). Repeated stamps occur in the Oxford data and are kept.
-More than a few bad rows (:data:`~fusiontrack.io.csvtable.MAX_BAD_ROW_SHARE` of them, or one) or out-of-order rows,
-a larger step back in time (a clock reset: two recordings in one file), or no usable row at all mean the file is
+gyroscope is non-finite (or, when that is most of them, the gyroscope altogether), and the fewest rows whose removal
+puts the stamps in order (out of order, or one stamped ahead). Repeated stamps occur in the Oxford data and are kept.
+More than a few bad rows or out-of-order rows (:data:`~fusiontrack.io.csvtable.MAX_BAD_ROW_SHARE` of them, or one:
+many rows back in time is a clock reset, two recordings in one file), or no usable row at all mean the file is
 not what it should be: :class:`~fusiontrack.errors.RecordingError` naming the file and the first bad line (1-based,
 as an editor shows it).
 No pandas: parsing is ``np.loadtxt`` with a line-by-line scan only to locate an error.
@@ -46,6 +46,8 @@ No pandas: parsing is ``np.loadtxt`` with a line-by-line scan only to locate an 
 
 from __future__ import annotations
 
+import bisect
+import decimal
 import functools
 import logging
 from dataclasses import dataclass
@@ -71,33 +73,51 @@ IMU_CSV_FORMATS = ("oxford_validation", "oxford_optimisation", "generic")
 """The values ``format=`` accepts besides ``"auto"``."""
 
 
-MAX_BACK_S = 1.0
-"""How far behind the latest stamp a row may come and still be dropped as out of order (a larger step back is a
-clock reset: two recordings in one file, an error)."""
+def _longest_in_order(t_ns: np.ndarray) -> np.ndarray:
+    """Mask of a longest non-decreasing subsequence of ``t_ns``: the fewest rows to drop to put the stamps in order
+    (one row stamped ahead costs itself, not the rows after it). Patience sorting, O(n log n); run only when some
+    stamp goes back."""
+    tails: list[int] = []  # the smallest last stamp of an in-order run of each length
+    tail_rows: list[int] = []
+    prev = [-1] * t_ns.size
+    for i, v in enumerate(t_ns.tolist()):
+        k = bisect.bisect_right(tails, v)
+        if k:
+            prev[i] = tail_rows[k - 1]
+        if k == len(tails):
+            tails.append(v)
+            tail_rows.append(i)
+        else:
+            tails[k], tail_rows[k] = v, i
+    keep = np.zeros(t_ns.size, dtype=bool)
+    i = tail_rows[-1] if tail_rows else -1
+    while i >= 0:
+        keep[i] = True
+        i = prev[i]
+    return keep
 
 
 def _check_time_order(path: Path, t_ns: np.ndarray, line_numbers: np.ndarray) -> np.ndarray:
-    """Rows to keep: all, but a few that come after a later stamp (out of order by up to :data:`MAX_BACK_S`), which
-    are dropped with a warning. Many such rows, or a larger step back, are an error naming the first line."""
-    latest = np.maximum.accumulate(t_ns)
-    back = np.flatnonzero(t_ns < latest)
+    """Rows to keep: all, or, when stamps go back, all but the fewest rows that put them in order, dropped with a
+    warning while they are few (:data:`~fusiontrack.io.csvtable.MAX_BAD_ROW_SHARE`, or one). More than that (a clock
+    reset: two recordings in one file) is an error naming the first line where time goes back."""
     n_repeat = int(np.count_nonzero(np.diff(t_ns) == 0))
     if n_repeat:
         logger.debug("%s: %d samples repeat the previous time stamp", path, n_repeat)
+    back = np.flatnonzero(np.diff(t_ns) < 0)
     if not back.size:
         return np.ones(t_ns.size, dtype=bool)
-    i = int(back[0])
-    lag_s = float((latest[back] - t_ns[back]).max()) * 1e-9
-    if back.size > max(1, int(MAX_BAD_ROW_SHARE * t_ns.size)) or lag_s > MAX_BACK_S:
+    keep = _longest_in_order(t_ns)
+    drop = np.flatnonzero(~keep)
+    if drop.size > max(1, int(MAX_BAD_ROW_SHARE * t_ns.size)):
+        i = int(back[0]) + 1
         raise RecordingError(
             f"{path}, line {int(line_numbers[i])}: time goes backwards ({int(t_ns[i])} ns after "
-            f"{int(latest[i])} ns); expected rows in non-decreasing time order"
-            + (f" ({back.size} rows out of order, up to {lag_s:.3g} s back)" if back.size > 1 else "")
+            f"{int(t_ns[i - 1])} ns); expected rows in non-decreasing time order ({drop.size} rows out of order: "
+            f"a clock reset, two recordings in one file?)"
         )
-    logger.warning("%s: dropped %d sample(s) out of time order (up to %.3g s back), first at line %d",
-                   path, back.size, lag_s, int(line_numbers[i]))
-    keep = np.ones(t_ns.size, dtype=bool)
-    keep[back] = False
+    shown = ", ".join(str(int(line_numbers[k])) for k in drop[:5]) + (", ..." if drop.size > 5 else "")
+    logger.warning("%s: dropped %d sample(s) out of time order (line %s)", path, drop.size, shown)
     return keep
 
 
@@ -237,6 +257,23 @@ def _int_column(path: Path, table: NumericTable, col: int, name: str) -> np.ndar
     return x.astype(np.int64)
 
 
+def _exact_ints(path: Path, line_numbers: np.ndarray, col: int, name: str) -> np.ndarray:
+    """Column ``col`` of the file's lines ``line_numbers`` as exact integers (float64 rounds beyond 2**53 ns, i.e.
+    epoch nanoseconds), read from the text of exactly the rows kept (``"170...00.0"`` is a whole number too)."""
+    lines = path.read_text(encoding="utf-8").splitlines()
+    out = np.empty(line_numbers.size, dtype=np.int64)
+    for k, ln in enumerate(line_numbers.tolist()):
+        text = lines[ln - 1].split(",")[col].strip()
+        try:
+            value = decimal.Decimal(text)
+            if value != value.to_integral_value():
+                raise decimal.InvalidOperation
+            out[k] = int(value)
+        except (decimal.InvalidOperation, ValueError, OverflowError):
+            raise RecordingError(f"{path}, line {ln}: {name} must be a whole number, got {text!r}") from None
+    return out
+
+
 def _read_validation(path: Path, sensor: str, frame_id: str) -> ImuCsv:
     table = read_numeric_table(path, n_cols=7, int_cols=(0,), what=_VALIDATION_COLS, skip_bad_rows=True)
     table = _keep(table, _finite_rows(path, table.values[:, 1:4], table.line_numbers, "acceleration"))
@@ -297,8 +334,7 @@ def _read_generic(path: Path, sensor: str, frame_id: str) -> ImuCsv:
     if name == "t_ns":
         t_ns = _int_column(path, table, col, "t_ns")
         if np.abs(table.values[:, col]).max() >= 2.0**53:  # beyond float64's exact integers
-            exact = read_numeric_table(path, header=True, int_cols=(col,), what=_GENERIC_DOC, skip_bad_rows=True)
-            t_ns = exact.ints[col][np.isin(exact.line_numbers, table.line_numbers)]
+            t_ns = _exact_ints(path, table.line_numbers, col, "t_ns")
     else:
         t = table.values[:, col]
         if name == "t_s" and np.abs(t).max() > 1e11:  # past the year 5000 in seconds: milliseconds since 1970
