@@ -315,6 +315,14 @@ def test_missing_empty_and_unknown(tmp_path: Path) -> None:
         read_imu_csv(tmp_path)
 
 
+def test_a_value_numpy_cannot_parse_is_named_by_its_file_line(tmp_path: Path) -> None:
+    # Python's float takes "9_8", numpy's parser does not: the error named numpy's 0-based data row, not the line
+    p = tmp_path / "t.csv"
+    p.write_text("a,b\n\n1,2\n3,9_8\n")
+    with pytest.raises(RecordingError, match=r"t\.csv, line 4, column 2: expected a number"):
+        read_numeric_table(p, header=True)
+
+
 def test_read_numeric_table_keeps_line_numbers(tmp_path: Path) -> None:
     p = tmp_path / "t.csv"
     p.write_text("a,b\n\n# c\n1,2\n3,4\n")

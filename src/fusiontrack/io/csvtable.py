@@ -66,6 +66,8 @@ def _row_problem(lineno: int, line: str, expected: int, int_cols: Sequence[int],
                 f"got {len(fields)}: {line.strip()[:80]!r}")
     for col, text in enumerate(fields):
         try:
+            if "_" in text or not text.isascii():  # Python's int / float take "9_8" and other scripts' digits;
+                raise ValueError  # numpy's parser does not
             int(text) if col in int_cols else float(text)
         except ValueError:
             kind = "an integer" if col in int_cols else "a number"
