@@ -184,23 +184,22 @@ if ENABLED:
                 iw += n_p
 
     @njit(cache=True, inline="always")
+    def _sq(ax, ay, bx, by):
+        """``|a - b|²`` as ``dx² + dy²`` (the numpy code's order)."""
+        dx = ax - bx
+        dy = ay - by
+        return dx * dx + dy * dy
+
+    @njit(cache=True, inline="always")
     def _ll_one(cols, t, p, f1x, f1y, f2x, f2y, sd, one, cf, c1, cw, kappa, lateral):
         lx = cols[0, t, p]
         ly = cols[1, t, p]
         rx = cols[2, t, p]
         ry = cols[3, t, p]
-        a = lx - f1x
-        b = ly - f1y
-        dl1 = a * a + b * b
-        a = lx - f2x
-        b = ly - f2y
-        dl2 = a * a + b * b
-        a = rx - f1x
-        b = ry - f1y
-        dr1 = a * a + b * b
-        a = rx - f2x
-        b = ry - f2y
-        dr2 = a * a + b * b
+        dl1 = _sq(lx, ly, f1x, f1y)
+        dl2 = _sq(lx, ly, f2x, f2y)
+        dr1 = _sq(rx, ry, f1x, f1y)
+        dr2 = _sq(rx, ry, f2x, f2y)
         l_to_1 = dl1 <= dl2
         if one:
             sq = (dl1 + dr1) if l_to_1 else (dl2 + dr2)
