@@ -180,12 +180,16 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         (["track", "{demo}", "-o", "{out}", "-c", "{fusion_typo}"],
          "fusion_typo.toml: [fusion]: unknown key(s) check_margn"),
         (["track", "{demo}", "-o", "{out}", "-c", "{wearable_typo}", "--pipeline", "wearable"],
-         "wearable_typo.toml: [wearable]: wearable: unknown option 'phone'"),
+         "wearable_typo.toml: [wearable]: unknown option 'phone'"),
         (["track", "{demo}", "-o", "{out}", "-c", "{traffic_workers}", "--pipeline", "traffic"],
          "traffic_workers.toml: [traffic]: traffic.workers: expected an integer >= 0"),
         # a sensor's topic that the recording does not have: the file and the sensor's table
         (["track", "{demo}", "-o", "{out}", "-c", "{topic_missing}"],
          "topic_missing.toml: [sensors.front] topic '/nope' is not in"),
+        (["track", "{demo}", "-o", "{out}", "-c", "{topic_missing}", "--pipeline", "traffic"],
+         "topic_missing.toml: [sensors.front] topic '/nope' is not in"),
+        (["track", "{demo}", "-o", "{out}", "-c", "{tracking_typo}", "--pipeline", "wearable"],
+         "tracking_typo.toml: [tracking]: unknown"),
         # numbers that are not finite, and a negative seed: the setting named, no traceback
         (["simulate", "crowd", "-o", "{out}", "--seconds", "inf"], "scenario.duration_s: Input should be a finite"),
         (["simulate", "crowd", "-o", "{out}", "--seconds", "1", "--seed", "-1"],

@@ -705,6 +705,8 @@ def _track_wearable(sources: list[Path], output: Path, *, config: Path | None, s
     if len(sources) != 1:
         raise ConfigError(f"wearable: one recording at a time (got {len(sources)})")
     cfg = _load_config(config)
+    _check_laser_tables(cfg, config, "pf")  # (unused here, but a typo in the file is an error whatever the run)
+    _check_sensor_topics(cfg, config, sources, {"imu", "rgbd", "camera"})
     options = {"seed": 0, **cfg.wearable, **({} if seed is None else {"seed": seed})}  # --seed wins
     with progress() as bar:
         task = bar.add_task("tracking (wearable)", total=None)
@@ -733,6 +735,8 @@ def _track_traffic(sources: list[Path], output: Path, *, config: Path | None, ge
     if len(sources) != 1:
         raise ConfigError(f"traffic: one recording at a time (got {len(sources)})")
     cfg = _load_config(config)
+    _check_laser_tables(cfg, config, "pf")  # (unused here, but a typo in the file is an error whatever the run)
+    _check_sensor_topics(cfg, config, sources, {"laser", "camera"})
     table = dict(cfg.traffic or {})
     in_file = table.pop("calibration", None)
     if calibration is None and in_file is not None:  # relative to the pipeline file

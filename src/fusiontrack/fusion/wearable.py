@@ -277,7 +277,7 @@ def check_options(options: Mapping[str, Any], source: str) -> None:
     try:
         _params_from(options)
     except ConfigError as err:
-        raise ConfigError(f"{source}: {err}") from None
+        raise ConfigError(f"{source}: {str(err).removeprefix('wearable: ')}") from None
 
 
 def _params_from(options: Mapping[str, Any]) -> WearableParams:

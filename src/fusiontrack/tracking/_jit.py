@@ -16,8 +16,8 @@ the numpy path's: the particle filters' resampling turns last-bit differences in
 with the same tracking quality (MOTA / IDF1 within the spread of ``--rng`` draws).
 
 Kernels are compiled on first use and cached next to this file (``NUMBA_CACHE_DIR`` moves the cache; a few
-seconds the first time, ~0.2 s after). ``FUSIONTRACK_NUMBA=0`` in the environment, or numba missing, keeps the
-numpy path.
+seconds the first time, ~0.2 s after). ``FUSIONTRACK_NUMBA=0`` (or ``false``, ``no``, ``off``) in the environment,
+or numba missing, keeps the numpy path.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import os
 
 import numpy as np
 
-ENABLED = os.environ.get("FUSIONTRACK_NUMBA", "1") != "0"
+ENABLED = os.environ.get("FUSIONTRACK_NUMBA", "1").strip().lower() not in ("0", "false", "no", "off")
 try:
     if not ENABLED:
         raise ImportError
