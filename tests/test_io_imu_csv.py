@@ -183,6 +183,21 @@ def test_generic_t_ns_exact_and_column_order(tmp_path: Path) -> None:
     np.testing.assert_array_equal(imu.t_ns, t0 + 10_000_000 * kept)
 
 
+def test_a_byte_order_mark_and_trailing_commas_are_read_as_spreadsheets_write_them(tmp_path: Path) -> None:
+    # a UTF-8 byte-order mark (Windows tools) made the header unreadable; a comma ending every line (some exporters)
+    # made every row one value too long
+    p = tmp_path / "phone.csv"
+    body = "".join(f"{k * 0.01:.2f},0,{k},9.81\n" for k in range(5))
+    for text in ("\ufefft_s,ax,ay,az\n" + body, "t_s,ax,ay,az,\n" + body.replace("\n", ",\n"),
+                 "t_s,ax,ay,az,\n" + body):
+        p.write_text(text, encoding="utf-8")
+        imu = read_imu_csv(p)
+        np.testing.assert_array_equal(imu.t_ns, np.arange(5) * 10_000_000)
+        np.testing.assert_array_equal(imu.accel_mps2[:, 1], np.arange(5))
+    p.write_text("".join(f"{1000 + k},0.1,{k},9.8,0,{k},0,\n" for k in range(4)))  # headerless Oxford rows
+    assert read_imu_csv(p).n_steps_gt == 3
+
+
 def test_generic_header_errors(tmp_path: Path) -> None:
     p = tmp_path / "phone.csv"
     p.write_text("time,ax,ay,az\n1,0,0,9.8\n")

@@ -47,7 +47,7 @@ class NumericTable:
 
 def _read_text(path: Path, what: str) -> str:
     try:
-        return path.read_text(encoding="utf-8")
+        return path.read_text(encoding="utf-8-sig")  # (a byte-order mark, as some Windows tools write, is dropped)
     except FileNotFoundError as err:
         raise RecordingError(f"{path}: no such file (expected {what})") from err
     except IsADirectoryError as err:
@@ -120,11 +120,16 @@ def read_numeric_table(
     text = _read_text(path, what)
     rows = [(i, line) for i, line in enumerate(text.splitlines(), start=1)
             if line.strip() and not line.lstrip().startswith(comment)]
+    # a comma ending every line (some exporters write one) closes the last value; it opens no empty column
+    if rows and all(line.rstrip().endswith(",") for _, line in rows[1 if header else 0:]):
+        rows = [(i, line.rstrip().removesuffix(",")) for i, line in rows]
     names: list[str] | None = None
     if header:
         if not rows:
             raise RecordingError(f"{path}: empty file (expected a header line and rows of {what})")
         names = [name.strip() for name in rows[0][1].split(",")]
+        if len(names) > 1 and not names[-1]:  # (the header alone ending in a comma)
+            names = names[:-1]
         rows = rows[1:]
         if n_cols is None:
             n_cols = len(names)

@@ -260,7 +260,7 @@ def _int_column(path: Path, table: NumericTable, col: int, name: str) -> np.ndar
 def _exact_ints(path: Path, line_numbers: np.ndarray, col: int, name: str) -> np.ndarray:
     """Column ``col`` of the file's lines ``line_numbers`` as exact integers (float64 rounds beyond 2**53 ns, i.e.
     epoch nanoseconds), read from the text of exactly the rows kept (``"170...00.0"`` is a whole number too)."""
-    lines = path.read_text(encoding="utf-8").splitlines()
+    lines = path.read_text(encoding="utf-8-sig").splitlines()
     out = np.empty(line_numbers.size, dtype=np.int64)
     for k, ln in enumerate(line_numbers.tolist()):
         text = lines[ln - 1].split(",")[col].strip()
@@ -395,7 +395,7 @@ def detect_imu_csv_format(path: str | Path) -> str:
     if path.name == "accelerometer.csv":
         return "oxford_optimisation"
     try:
-        with path.open(encoding="utf-8") as f:
+        with path.open(encoding="utf-8-sig") as f:
             first = next((line for line in f if line.strip() and not line.lstrip().startswith("#")), "")
     except (OSError, UnicodeDecodeError) as err:
         raise RecordingError(f"{path}: cannot be read (expected an IMU CSV file)") from err
@@ -403,7 +403,7 @@ def detect_imu_csv_format(path: str | Path) -> str:
         what = "empty file (0 bytes)" if path.stat().st_size == 0 else "no data: only blank or comment lines"
         raise RecordingError(f"{path}: {what}; expected an IMU CSV file: 7 columns ({_VALIDATION_COLS}), "
                              f"5 ({_ACCEL_COLS}) or {_GENERIC_DOC}")
-    fields = [x.strip() for x in first.split(",")]
+    fields = [x.strip() for x in first.rstrip().removesuffix(",").split(",")]  # (a trailing comma: no column)
     if any(c.isalpha() and x.lower() not in ("nan", "inf", "-inf") for x in fields for c in x[:1]):
         return "generic"
     if len(fields) == 7:
