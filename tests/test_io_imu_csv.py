@@ -196,6 +196,9 @@ def test_a_byte_order_mark_and_trailing_commas_are_read_as_spreadsheets_write_th
         np.testing.assert_array_equal(imu.accel_mps2[:, 1], np.arange(5))
     p.write_text("".join(f"{1000 + k},0.1,{k},9.8,0,{k},0,\n" for k in range(4)))  # headerless Oxford rows
     assert read_imu_csv(p).n_steps_gt == 3
+    p.write_text("t_s\tax\tay\taz\n0.00\t0\t0\t9.81\n")  # said of every row: "expected a number"
+    with pytest.raises(RecordingError, match=r"phone\.csv, line 1: tab-separated values; expected comma-separated"):
+        read_imu_csv(p, format="generic")
 
 
 def test_generic_header_errors(tmp_path: Path) -> None:

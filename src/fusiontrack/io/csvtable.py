@@ -120,6 +120,8 @@ def read_numeric_table(
     text = _read_text(path, what)
     rows = [(i, line) for i, line in enumerate(text.splitlines(), start=1)
             if line.strip() and not line.lstrip().startswith(comment)]
+    if rows and "\t" in rows[0][1] and "," not in rows[0][1]:
+        raise RecordingError(f"{path}, line {rows[0][0]}: tab-separated values; expected comma-separated ({what})")
     # a comma ending every line (some exporters write one) closes the last value; it opens no empty column
     if rows and all(line.rstrip().endswith(",") for _, line in rows[1 if header else 0:]):
         rows = [(i, line.rstrip().removesuffix(",")) for i, line in rows]
