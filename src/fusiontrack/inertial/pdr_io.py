@@ -28,6 +28,7 @@ import numpy as np
 from ..errors import ConfigError, RecordingError
 from ..types import ImuSample
 from .dead_reckoning import PdrResult, run_pdr
+from .preprocess import gyro_glitches
 from .step_length import StepLengthModel, fit_step_model, load_step_model
 from .steps import StepDetectorParams, detect_steps
 
@@ -121,16 +122,15 @@ def drop_unusable_imu(where: str, t: np.ndarray, accel: np.ndarray, gyro: np.nda
         log.warning("%s: dropped %d IMU message(s) with a non-finite acceleration (of %d)", where,
                     np.count_nonzero(~ok), ok.size)
         t, accel, gyro = t[ok], accel[ok], gyro[ok]
-    has = np.isfinite(gyro).all(axis=1)
-    if has.any() and not has.all():
-        if np.count_nonzero(~has) <= has.size // 2:
-            log.warning("%s: dropped %d IMU message(s) with a non-finite gyroscope (of %d)", where,
-                        np.count_nonzero(~has), has.size)
-            t, accel, gyro = t[has], accel[has], gyro[has]
-        else:
-            log.warning("%s: the gyroscope is missing (non-finite) from %d of %d IMU messages; it is not used",
-                        where, np.count_nonzero(~has), has.size)
-            gyro = np.full_like(gyro, np.nan)
+    bad = gyro_glitches(gyro)
+    if bad is None:
+        log.warning("%s: the gyroscope is missing (non-finite) from most of %d IMU messages; it is not used", where,
+                    t.size)
+        gyro = np.full_like(gyro, np.nan)
+    elif bad.any():
+        log.warning("%s: dropped %d IMU message(s) with a non-finite gyroscope (of %d)", where, np.count_nonzero(bad),
+                    bad.size)
+        t, accel, gyro = t[~bad], accel[~bad], gyro[~bad]
     return t, accel, gyro
 
 

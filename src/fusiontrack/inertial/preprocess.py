@@ -30,6 +30,7 @@ __all__ = [
     "check_imu",
     "detect_still_period",
     "gravity_to_level",
+    "gyro_glitches",
     "level_imu",
     "resample_uniform",
     "vertical_acceleration",
@@ -107,6 +108,18 @@ def check_imu(t_ns: Any, accel_mps2: Any, gyro_radps: Any = None, *,
             raise ValueError(f"gyro_radps: sample {int(bad[0])} is not finite ({gyro[bad[0]].tolist()}); expected "
                              "all finite, or all NaN for a device without a gyroscope")
     return t, accel, gyro
+
+
+def gyro_glitches(gyro_radps: np.ndarray) -> np.ndarray | None:
+    """The one rule for a gyroscope that is non-finite in places (the CSV reader and the recordings' IMU streams):
+    the rows to drop, ``(n,)`` bool, when they are at most half (a few glitches cost their samples), or ``None``
+    when the gyroscope is missing from most rows and is better not used at all (the attitude then comes from the
+    accelerometer alone, rather than most steps being lost). All finite, or all non-finite: no row to drop."""
+    bad = ~np.isfinite(gyro_radps).all(axis=1)
+    n_bad = int(np.count_nonzero(bad))
+    if n_bad == 0 or n_bad == bad.size:
+        return np.zeros(bad.size, dtype=bool)
+    return bad if n_bad <= bad.size // 2 else None
 
 
 # ---- uniform sampling ----------------------------------------------------------------------------

@@ -56,7 +56,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError, RecordingError
-from ..inertial.preprocess import G_MPS2
+from ..inertial.preprocess import G_MPS2, gyro_glitches
 from ..types import ImuSample
 from .csvtable import MAX_BAD_ROW_SHARE, NumericTable, read_numeric_table
 
@@ -360,17 +360,15 @@ def _read_generic(path: Path, sensor: str, frame_id: str) -> ImuCsv:
             raise RecordingError(f"{path}: the gyroscope's 99th percentile is {top:.4g}, beyond a phone "
                                  f"gyroscope's range (2000 deg/s = 34.9 rad/s): gx, gy, gz must be in rad/s "
                                  f"(values in deg/s: multiply by pi/180)")
-        if ok.any() and not ok.all():
-            # a few gyro glitches cost their samples; a gyroscope missing from most of the file is not used at all
-            # (the attitude then comes from the accelerometer alone), rather than lose most of the steps
-            if np.count_nonzero(~ok) <= ok.size // 2:
-                logger.warning("%s: dropped %d sample(s) with a non-finite gyroscope, first at line %d", path,
-                               np.count_nonzero(~ok), int(table.line_numbers[np.flatnonzero(~ok)[0]]))
-                table, t_ns, accel, gyro = _keep(table, ok), t_ns[ok], accel[ok], gyro[ok]
-            else:
-                logger.warning("%s: the gyroscope is missing (non-finite) from %d of %d samples; it is not used",
-                               path, np.count_nonzero(~ok), ok.size)
-                gyro = np.full((t_ns.size, 3), np.nan)
+        bad = gyro_glitches(gyro)
+        if bad is None:
+            logger.warning("%s: the gyroscope is missing (non-finite) from %d of %d samples; it is not used",
+                           path, np.count_nonzero(~ok), ok.size)
+            gyro = np.full((t_ns.size, 3), np.nan)
+        elif bad.any():
+            logger.warning("%s: dropped %d sample(s) with a non-finite gyroscope, first at line %d", path,
+                           np.count_nonzero(bad), int(table.line_numbers[np.flatnonzero(bad)[0]]))
+            table, t_ns, accel, gyro = _keep(table, ~bad), t_ns[~bad], accel[~bad], gyro[~bad]
     return ImuCsv(path, "generic", sensor, frame_id, t_ns, accel, gyro)
 
 
