@@ -16,6 +16,7 @@ from fusiontrack.config import load_config, parse_config
 from fusiontrack.errors import ConfigError, FusiontrackError, MessageTypeError, RecordingError, TopicError
 from fusiontrack.io.recording import Recording
 from fusiontrack.io.writer import RecordingWriter, write_recording
+from fusiontrack.sim.scenario import parse_scenario
 from fusiontrack.types import LaserScan
 
 DEMO = "laser/leg_tracker_demo/demo_stationary_simple_environment.bag"
@@ -129,6 +130,18 @@ def test_config_errors_name_the_field():
         parse_config({"sync": {"window_ms": -5}})
     with pytest.raises(ConfigError, match=r"sensors\.l\.topc"):  # a typo is not silently ignored
         parse_config({"sensors": {"l": {"kind": "laser", "topc": "/scan"}}})
+
+
+def test_an_unknown_key_is_named_beside_the_known_ones():
+    # the right spelling is in the message, at every depth: top-level table, sensor key, pose key
+    with pytest.raises(ConfigError, match=r"trackin: unknown table \(known: .*\btracking\b"):
+        parse_config({"trackin": {"max_speed": 2.0}})
+    with pytest.raises(ConfigError, match=r"sensors\.l\.topc: unknown key \(known: .*\btopic\b"):
+        parse_config({"sensors": {"l": {"kind": "laser", "topc": "/scan"}}})
+    with pytest.raises(ConfigError, match=r"sensors\.l\.pose\.yaw: unknown key \(known: .*\byaw_deg\b"):
+        parse_config({"sensors": {"l": {"kind": "laser", "topic": "/scan", "pose": {"yaw": 3}}}})
+    with pytest.raises(ConfigError, match=r"scene\.toml: scenario\.duration: unknown key \(known: .*\bduration_s\b"):
+        parse_scenario({"scenario": {"duration": 10}}, "scene.toml")
 
 
 def test_config_file_problems(tmp_path):

@@ -41,6 +41,16 @@ def test_info_on_video_and_imu_csv(shared_data):
     assert abs(by_kind["imu_csv"]["rate_hz"] - 100) < 2
 
 
+def test_info_on_a_one_sample_imu_csv_is_valid_json(shared_data, tmp_path):
+    # one sample has no sampling rate: JSON null (NaN is not JSON), and the line says so instead of "nan Hz"
+    real = shared_data / "imu/oxford_step_counter/validation/user1_hand_1506421989895.csv"
+    one = tmp_path / "one.csv"
+    one.write_text("".join(real.read_text().splitlines(keepends=True)[:1]))
+    out = json.loads(run("info", str(one), "--json").stdout)
+    assert (out["samples"], out["rate_hz"], out["duration_s"]) == (1, None, 0.0)
+    assert "nan" not in run("info", str(one)).stdout.lower()
+
+
 def test_convert_to_mcap_keeps_every_scan(shared_data, tmp_path):
     bag = shared_data / DEMO
     run("convert", str(bag), "-o", str(tmp_path / "mcap"))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import sys
 from collections.abc import Iterator, Mapping, Sequence
@@ -129,7 +130,8 @@ def describe_imu_csv(path: Path) -> dict[str, Any]:
 
     data = read_imu_csv(path)
     out: dict[str, Any] = {"kind": "imu_csv", "paths": [str(path)], "format": data.format, "samples": len(data),
-                           "duration_s": data.duration_s, "rate_hz": data.rate_hz}
+                           "duration_s": data.duration_s,
+                           "rate_hz": data.rate_hz if math.isfinite(data.rate_hz) else None}  # (one sample: no rate)
     if data.n_steps_gt is not None:
         out["ground_truth_steps"] = data.n_steps_gt
     return out
@@ -153,8 +155,9 @@ def _print_description(d: dict[str, Any]) -> None:
                       f"at {d['fps']:.2f} fps, {d['duration_s']:.2f} s")
     else:
         extra = f", {d['ground_truth_steps']} ground-truth steps" if "ground_truth_steps" in d else ""
-        console.print(f"[bold]{d['paths'][0]}[/]: IMU CSV ({d['format']}), {d['samples']} samples at "
-                      f"{d['rate_hz']:.1f} Hz, {d['duration_s']:.1f} s{extra}")
+        rate = f" at {d['rate_hz']:.1f} Hz" if d["rate_hz"] is not None else ""
+        console.print(f"[bold]{d['paths'][0]}[/]: IMU CSV ({d['format']}), {d['samples']} "
+                      f"sample{'s' if d['samples'] != 1 else ''}{rate}, {d['duration_s']:.1f} s{extra}")
 
 
 def _describe(paths: list[Path], merge: bool) -> list[dict[str, Any]]:

@@ -26,7 +26,8 @@ from __future__ import annotations
 import tomllib
 from enum import StrEnum
 from pathlib import Path
-from typing import Any
+from types import UnionType
+from typing import Any, Union, get_args, get_origin
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -154,11 +155,32 @@ def _location(loc: tuple[Any, ...]) -> str:
     return ".".join(str(p) for p in loc) or "(top level)"
 
 
-def parse_error_message(err: ValidationError, source: str) -> str:
-    """One line naming ``source`` and every offending field with what was expected and what was given."""
+def _known_keys(model: Any, loc: tuple[Any, ...]) -> list[str] | None:
+    """The keys accepted by the table that holds ``loc``'s last part, walking from ``model`` through its fields
+    (models, ``dict[str, Model]``, ``list[Model]``, optional ones); None where the walk leaves the models."""
+    for part in loc[:-1]:
+        if isinstance(model, type) and issubclass(model, BaseModel):
+            field = model.model_fields.get(str(part))
+            model = field.annotation if field is not None else None
+        else:  # a dict's key or a list's index: its values' type
+            model = next((a for a in reversed(get_args(model)) if a is not type(None)), None)
+        if get_origin(model) in (Union, UnionType):  # X | None
+            model = next((a for a in get_args(model) if a is not type(None)), None)
+    return sorted(model.model_fields) if isinstance(model, type) and issubclass(model, BaseModel) else None
+
+
+def parse_error_message(err: ValidationError, source: str, model: type[BaseModel] | None = None) -> str:
+    """One line naming ``source`` and every offending field with what was expected and what was given; an
+    unknown key or table is named with the ones accepted in its place (a typo shows beside its right spelling)."""
     problems = []
     for e in err.errors():
         given = e.get("input")
+        if e["type"] == "extra_forbidden":
+            known = _known_keys(model, tuple(e["loc"])) if model is not None else None
+            where = "table" if isinstance(given, dict) else "key"
+            problems.append(f"{_location(e['loc'])}: unknown {where}"
+                            + (f" (known: {', '.join(known)})" if known else ""))
+            continue
         shown = "" if isinstance(given, dict) else f" (got {given!r})"
         problems.append(f"{_location(e['loc'])}: {e['msg']}{shown}")
     return f"{source}: " + "; ".join(problems)
@@ -175,7 +197,7 @@ def parse_config(data: dict[str, Any], source: str = "<config>") -> PipelineConf
     try:
         return PipelineConfig.model_validate(data)
     except ValidationError as err:
-        raise ConfigError(parse_error_message(err, source)) from err
+        raise ConfigError(parse_error_message(err, source, PipelineConfig)) from err
 
 
 def load_config(path: str | Path) -> PipelineConfig:

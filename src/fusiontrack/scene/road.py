@@ -553,7 +553,7 @@ def parse_road_geometry(data: dict[str, Any], source: str = "<geometry>") -> Roa
     try:
         cfg = GeometryFile.model_validate(data)
     except ValidationError as err:
-        raise ConfigError(parse_error_message(err, source)) from err
+        raise ConfigError(parse_error_message(err, source, GeometryFile)) from err
     return _build(cfg, source)
 
 

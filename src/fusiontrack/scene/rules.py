@@ -363,7 +363,7 @@ def parse_rules(data: Mapping[str, Any], source: str = "<rules>") -> SceneRules:
     try:
         cfg = RulesFile.model_validate(dict(data))
     except ValidationError as err:
-        raise ConfigError(parse_error_message(err, source)) from err
+        raise ConfigError(parse_error_message(err, source, RulesFile)) from err
     compiled = []
     for name, spec in cfg.rules.items():
         if not spec.enabled:

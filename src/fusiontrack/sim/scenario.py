@@ -225,7 +225,7 @@ def parse_scenario(data: Mapping[str, Any], source: str, name: str = "") -> Scen
     try:
         config = ScenarioConfig.model_validate(data)
     except ValidationError as err:
-        raise ConfigError(parse_error_message(err, source)) from err
+        raise ConfigError(parse_error_message(err, source, ScenarioConfig)) from err
     return Scenario(name or Path(source).stem, config, source)
 
 
