@@ -178,3 +178,53 @@ def test_a_long_gap_gives_no_velocity_rather_than_an_error(numpy_path):
     a, b = run(), numpy_path(run)
     assert np.isfinite(a).all()
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-6)
+
+
+_CACHED_KERNEL = '''
+import numpy as np
+from fusiontrack.tracking._jit import njit
+
+@njit(cache=True)
+def halve_sum(x):
+    s = 0.0
+    for v in x:
+        s += 0.5 * v
+    return s
+
+print(halve_sum(np.arange(10.0)))
+'''
+
+
+@pytest.mark.skipif(not _jit.ENABLED, reason="numba not installed or disabled")
+@pytest.mark.parametrize("damaged", ["nbc", "nbi"])
+def test_a_damaged_kernel_cache_is_compiled_again(tmp_path, damaged):
+    """A cache file cut short (a full disk, a killed process) gave numba's unpickling traceback at the kernel's first
+    call, in every later run. Now it is a cache miss: the kernel compiles, warns once, and rewrites the file."""
+    import os
+    import subprocess
+    import sys
+
+    (tmp_path / "kern.py").write_text(_CACHED_KERNEL)
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}  # the cache beside kern.py
+    env["PYTHONPATH"] = str(tmp_path)
+
+    def run() -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-c", "import logging; logging.basicConfig(); import kern"],
+                              capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
+
+    first = run()
+    assert first.returncode == 0, first.stderr
+    assert first.stdout.strip() == "22.5"
+    files = sorted((tmp_path / "__pycache__").glob(f"kern.halve_sum-*.{damaged}"))
+    assert files, sorted(p.name for p in (tmp_path / "__pycache__").iterdir())
+    for f in files:
+        f.write_bytes(f.read_bytes()[:20])
+    second = run()
+    assert second.returncode == 0, second.stderr
+    assert second.stdout.strip() == "22.5"
+    assert "cannot be read" in second.stderr
+    assert "compiling it again" in second.stderr
+    third = run()  # the file was rewritten: read back without a word
+    assert third.returncode == 0
+    assert third.stdout.strip() == "22.5"
+    assert "cannot be" not in third.stderr, third.stderr

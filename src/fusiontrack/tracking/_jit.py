@@ -22,10 +22,13 @@ or numba missing, keeps the numpy path.
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 
 import numpy as np
+
+_log = logging.getLogger(__name__)
 
 ENABLED = os.environ.get("FUSIONTRACK_NUMBA", "1").strip().lower() not in ("0", "false", "no", "off")
 try:
@@ -41,16 +44,52 @@ def njit(**options):  # type: ignore[no-untyped-def]
     """numba's ``njit`` as the kernels need it: numpy's floating-point error model (a division by zero gives inf or
     NaN, as in the numpy code, not ``ZeroDivisionError``), and the on-disk cache when numba finds a writable place
     for it (a read-only install with no writable cache folder compiles in every process instead of failing at
-    import)."""
+    import; a damaged cache file, e.g. cut short by a full disk or a killed process, is compiled again with a
+    warning instead of numba's unpickling traceback: :func:`_tolerant_cache`)."""
     options.setdefault("error_model", "numpy")
 
     def wrap(fn):  # type: ignore[no-untyped-def]
         try:
-            return _njit(**options)(fn)
+            return _tolerant_cache(_njit(**options)(fn))
         except RuntimeError:  # "cannot cache function ...: no locator available"
             return _njit(**{**options, "cache": False})(fn)
 
     return wrap
+
+
+def _tolerant_cache(dispatcher):  # type: ignore[no-untyped-def]
+    """``dispatcher`` whose on-disk cache, when a file of it cannot be read back (truncated, garbled), counts as a
+    miss: the kernel is compiled again and the file rewritten (numba raises from the unpickling otherwise, at the
+    kernel's first call). Works on numba's ``_cache`` attribute (numba < 1); without it, numba's own behaviour."""
+    cache = getattr(dispatcher, "_cache", None)
+    if cache is None or not hasattr(cache, "load_overload") or not hasattr(cache, "save_overload"):
+        return dispatcher  # pragma: no cover
+    load, save = cache.load_overload, cache.save_overload
+    name = getattr(dispatcher, "__qualname__", "kernel")
+
+    def load_overload(sig, target_context):  # type: ignore[no-untyped-def]
+        try:
+            return load(sig, target_context)
+        except Exception as err:  # any unreadable file: compile instead
+            _log.warning("numba cache of %s (%s) cannot be read (%s: %s): compiling it again", name,
+                         getattr(cache, "cache_path", "?"), type(err).__name__, err)
+            return None
+
+    def save_overload(sig, data):  # type: ignore[no-untyped-def]
+        try:
+            save(sig, data)
+        except Exception:  # a damaged index: drop it, then save afresh
+            index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
+            try:
+                if index:
+                    os.remove(index)
+                save(sig, data)
+            except Exception as err:  # the kernel runs; only the next process compiles again
+                _log.warning("numba cache of %s cannot be written (%s: %s)", name, type(err).__name__, err)
+
+    cache.load_overload, cache.save_overload = load_overload, save_overload
+    return dispatcher
+
 
 TWO_PI = 2.0 * np.pi
 PI = np.pi
