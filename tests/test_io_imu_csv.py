@@ -286,6 +286,39 @@ def test_one_row_stamped_ahead_costs_itself_not_the_rows_after_it(tmp_path: Path
 
 
 @needs_oxford
+@pytest.mark.parametrize("end", ["last", "first"])
+def test_a_lone_row_stamped_far_from_the_log_at_either_end_is_dropped(tmp_path: Path, end: str,
+                                                                      caplog: pytest.LogCaptureFixture) -> None:
+    """A real trace whose last row is stamped 50 s ahead (or first row 50 s back): in time order, so nothing else
+    caught it, and ``info`` reported a log 50 s longer. The row is dropped with a warning naming its line; the span,
+    the rate and the ground-truth step count are the clean trace's."""
+    src = _validation_file("frontpocket")
+    lines = src.read_text().splitlines()
+    clean = read_imu_csv(src)
+    k = -1 if end == "last" else 0
+    fields = lines[k].split(",")
+    fields[0] = str(int(fields[0]) + (50_000_000_000 if end == "last" else -50_000_000_000))
+    lines[k] = ",".join(fields)
+    p = tmp_path / "user1_frontpocket_stray.csv"
+    p.write_text("\n".join(lines) + "\n")
+    with caplog.at_level("WARNING"):
+        imu = read_imu_csv(p)
+    line = len(lines) if end == "last" else 1
+    assert f"line {line}: dropped a sample stamped 50 s from the rest of the log, alone at its" in caplog.text
+    assert len(imu) == len(clean) - 1
+    assert abs(imu.duration_s - clean.duration_s) < 0.05  # one sample interval, not 50 s
+    assert imu.n_steps_gt == clean.n_steps_gt
+
+
+def test_a_pause_inside_a_log_is_kept(tmp_path: Path) -> None:
+    # a gap between two long runs of samples is the phone pausing, not a glitch: nothing is dropped
+    p = tmp_path / "phone.csv"
+    t = np.concatenate([np.arange(500) * 0.01, 60 + np.arange(500) * 0.01])
+    p.write_text("t_s,ax,ay,az\n" + "\n".join(f"{x:.2f},0,0,9.81" for x in t) + "\n")
+    assert len(read_imu_csv(p)) == 1000
+
+
+@needs_oxford
 def test_a_damaged_real_trace_loses_only_its_bad_rows(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     """A NaN sample, a garbled row, two rows swapped and a last line cut short (the phone stopped mid-write) in
     a real trace: each bad row is dropped with a warning that names the file and line, and the rest is read

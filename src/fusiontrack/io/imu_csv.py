@@ -121,6 +121,34 @@ def _check_time_order(path: Path, t_ns: np.ndarray, line_numbers: np.ndarray) ->
     return keep
 
 
+STRAY_GAP_S = 1.0
+"""A first or last sample this far (or 100 sampling intervals, if longer) from the rest of the log is dropped."""
+
+
+def _stray_ends(path: Path, t_ns: np.ndarray, line_numbers: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """``keep`` without a first or last sample stamped far from all the others (a clock glitch at the start or end
+    of a log: one row stamped ahead as the phone stopped writing, or one far back): in time order, so nothing else
+    marks it, and it would stretch the log's span (``info``, trajectories) by the gap. Dropped with a warning; a log
+    of fewer than 10 samples is left as it is."""
+    rows = np.flatnonzero(keep)
+    if rows.size < 10:
+        return keep
+    t = t_ns[rows]
+    dt = np.diff(t)
+    pos = dt[dt > 0]
+    if not pos.size:
+        return keep
+    limit = max(STRAY_GAP_S * 1e9, 100.0 * float(np.median(pos)))
+    keep = keep.copy()
+    for end, gap in ((rows[0], dt[0]), (rows[-1], dt[-1])):
+        if gap > limit:
+            keep[end] = False
+            logger.warning("%s, line %d: dropped a sample stamped %.3g s from the rest of the log, alone at its %s "
+                           "(a clock glitch?)", path, int(line_numbers[end]), gap / 1e9,
+                           "start" if end == rows[0] else "end")
+    return keep
+
+
 def _finite_rows(path: Path, x: np.ndarray, line_numbers: np.ndarray, what: str) -> np.ndarray:
     """Rows of ``x (n, k)`` that are all finite; the others (a NaN sample, a sensor that stopped) are dropped
     with a warning."""
@@ -277,7 +305,8 @@ def _exact_ints(path: Path, line_numbers: np.ndarray, col: int, name: str) -> np
 def _read_validation(path: Path, sensor: str, frame_id: str) -> ImuCsv:
     table = read_numeric_table(path, n_cols=7, int_cols=(0,), what=_VALIDATION_COLS, skip_bad_rows=True)
     table = _keep(table, _finite_rows(path, table.values[:, 1:4], table.line_numbers, "acceleration"))
-    table = _keep(table, _check_time_order(path, table.ints[0], table.line_numbers))
+    order = _check_time_order(path, table.ints[0], table.line_numbers)
+    table = _keep(table, _stray_ends(path, table.ints[0], table.line_numbers, order))
     t_ns = table.ints[0]
     app, gt, hw = (_int_column(path, table, c, name) for c, name in
                    ((4, "steps_by_app"), (5, "steps_by_ground_truth"), (6, "steps_by_hw")))
@@ -291,7 +320,8 @@ def _read_optimisation(path: Path, sensor: str, frame_id: str) -> ImuCsv:
     accel_path = folder / "accelerometer.csv" if path.is_dir() else path
     table = read_numeric_table(accel_path, n_cols=5, int_cols=(0,), what=_ACCEL_COLS, skip_bad_rows=True)
     table = _keep(table, _finite_rows(accel_path, table.values[:, 2:5], table.line_numbers, "acceleration"))
-    table = _keep(table, _check_time_order(accel_path, table.ints[0], table.line_numbers))
+    order = _check_time_order(accel_path, table.ints[0], table.line_numbers)
+    table = _keep(table, _stray_ends(accel_path, table.ints[0], table.line_numbers, order))
     t_ns = table.ints[0]
     kinds = np.unique(table.values[:, 1])
     if kinds.size > 1:
@@ -341,7 +371,7 @@ def _read_generic(path: Path, sensor: str, frame_id: str) -> ImuCsv:
             raise RecordingError(f"{path}: t_s reaches {np.abs(t).max():.6g}, which is milliseconds (or finer), "
                                  f"not seconds: name the column t_ms (or t_ns)")
         t_ns = np.rint(t * (1e6 if name == "t_ms" else 1e9)).astype(np.int64)
-    keep = _check_time_order(path, t_ns, table.line_numbers)
+    keep = _stray_ends(path, t_ns, table.line_numbers, _check_time_order(path, t_ns, table.line_numbers))
     table, t_ns = _keep(table, keep), t_ns[keep]
     accel = table.values[:, accel_cols]
     norm = np.linalg.norm(accel, axis=1)
