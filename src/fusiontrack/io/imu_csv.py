@@ -36,7 +36,8 @@ the first data line decides: a header with letters is ``generic``, seven numbers
 Bad sensor data inside a log costs only its samples, each drop a warning naming the file and line: a row cut
 short (the phone stopped mid-write) or garbled, a sample with a non-finite time or acceleration, a sample whose
 gyroscope is non-finite (or, when that is most of them, the gyroscope altogether), and the fewest rows whose removal
-puts the stamps in order (out of order, or one stamped ahead). Repeated stamps occur in the Oxford data and are kept.
+puts the stamps in order (out of order, or one stamped ahead), and a lone first or last sample stamped far from
+the rest (:data:`STRAY_GAP_S`). Repeated stamps occur in the Oxford data and are kept.
 More than a few bad rows or out-of-order rows (:data:`~fusiontrack.io.csvtable.MAX_BAD_ROW_SHARE` of them, or one:
 many rows back in time is a clock reset, two recordings in one file), or no usable row at all mean the file is
 not what it should be: :class:`~fusiontrack.errors.RecordingError` naming the file and the first bad line (1-based,
