@@ -2,6 +2,8 @@
 
 * :mod:`.mot` — CLEAR MOT, identity and HOTA metrics on floor-plane distances or image boxes.
 * :mod:`.situations` — true counts, detections and false alarms of merge/split/correlated/appear/disappear.
+* :mod:`.switches` — the cause of each identity switch (two tracks exchanging people, a track lost and replaced, an
+  older track taking over).
 """
 
 from .errors import EvaluationError
@@ -29,12 +31,15 @@ from .situations import (
     situation_agreement,
     situation_table,
 )
+from .switches import SWITCH_CAUSES, IdSwitch, id_switch_causes, switch_cause_counts
 
 __all__ = [
     "MOT16_DISTRACTOR_CLASSES",
     "MOT20_DISTRACTOR_CLASSES",
+    "SWITCH_CAUSES",
     "EvaluationError",
     "FrameMatches",
+    "IdSwitch",
     "Metrics",
     "MetricsTable",
     "SituationAgreement",
@@ -46,10 +51,12 @@ __all__ = [
     "evaluate_mot_files",
     "floor_similarity",
     "frame_matches",
+    "id_switch_causes",
     "match_events",
     "metrics_table",
     "situation_accuracy",
     "situation_agreement",
     "situation_table",
+    "switch_cause_counts",
     "truth_at",
 ]

@@ -1,0 +1,118 @@
+"""Why each identity switch happened: exchanges between two tracks, or a person's track lost and replaced.
+
+CLEAR's ID switches (:attr:`fusiontrack.eval.Metrics.id_switches`) count every time a person's matched track
+changes; they do not say why. The cure differs with the cause: two people who *exchange* tracks when they meet
+need appearance (seed 001's classifiers at a merge or split), a track *lost* and replaced by a new one needs better
+continuity (coasting through occlusions, re-identification), and an older track *taking over* a person whose own
+track drifted off needs better association. :func:`id_switch_causes` labels each switch of a run's CLEAR matches
+(:func:`fusiontrack.eval.frame_matches`), so a benchmark can show which of these a tracker suffers from.
+
+A switch of person ``g`` from track ``a`` to track ``b`` at ``t`` (``g`` matched ``a`` last, ``b`` now) is
+
+* ``exchange`` — another person switched from ``b`` to ``a`` within ``exchange_s`` of ``t``: the two tracks
+  exchanged their people (each such pair counts two switches, as CLEAR counts them);
+* ``reborn`` — else, ``b`` began within ``new_s`` before ``t`` and ``a`` ended by ``t + ended_s``: the person's
+  track was lost and a new one started (re-identification's case);
+* ``new_track`` — else, ``b`` began within ``new_s`` before ``t`` while ``a`` goes on: a new track took the person
+  from a track that drifted off (onto somebody else, or onto nothing);
+* ``takeover`` — else: an older track, which was following somebody else or nobody, took the person.
+
+The labels cover every switch CLEAR counts, so their counts sum to the run's ``id_switches``.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+from ..types import Track, TrackState
+from .mot import FrameMatches
+
+__all__ = ["SWITCH_CAUSES", "IdSwitch", "id_switch_causes", "switch_cause_counts"]
+
+SWITCH_CAUSES = ("exchange", "reborn", "new_track", "takeover")
+
+
+@dataclass(frozen=True, slots=True)
+class IdSwitch:
+    """One CLEAR identity switch: person ``gt_id`` matched ``from_track`` last (at ``last_ns``) and ``to_track``
+    at ``t_ns``; ``cause`` is one of :data:`SWITCH_CAUSES` (module docstring)."""
+
+    t_ns: int
+    gt_id: int
+    from_track: int
+    to_track: int
+    last_ns: int
+    cause: str
+
+
+def _lifetimes(tracks: Iterable[TrackState | Track]) -> dict[int, tuple[int, int]]:
+    span: dict[int, list[int]] = {}
+    for tr in tracks:
+        if isinstance(tr, Track):
+            if tr.states:
+                _extend(span, tr.track_id, tr.t_start_ns, tr.t_end_ns)
+        else:
+            _extend(span, tr.track_id, tr.t_ns, tr.t_ns)
+    return {tid: (lo, hi) for tid, (lo, hi) in span.items()}
+
+
+def _extend(span: dict[int, list[int]], tid: int, lo: int, hi: int) -> None:
+    s = span.get(tid)
+    if s is None:
+        span[tid] = [lo, hi]
+    else:
+        s[0], s[1] = min(s[0], lo), max(s[1], hi)
+
+
+def id_switch_causes(matches: FrameMatches, tracks: Iterable[TrackState | Track], *, exchange_s: float = 3.0,
+                     new_s: float = 2.0, ended_s: float = 0.5) -> list[IdSwitch]:
+    """Every CLEAR identity switch of a run, with its cause (module docstring), in time order.
+
+    Parameters
+    ----------
+    matches : FrameMatches
+        The run's CLEAR matches (:func:`fusiontrack.eval.frame_matches` of the same ground truth and tracks).
+    tracks : iterable of TrackState or Track
+        The tracks those matches were made from: their first and last times.
+    exchange_s, new_s, ended_s : float
+        The windows of the rules, s.
+    """
+    for name, v in (("exchange_s", exchange_s), ("new_s", new_s), ("ended_s", ended_s)):
+        if not v >= 0:
+            raise ValueError(f"{name}: expected a value >= 0, got {v!r}")
+    life = _lifetimes(tracks)
+    last: dict[int, tuple[int, int]] = {}  # person -> (track, time) of its last match
+    raw: list[tuple[int, int, int, int, int]] = []  # (t, person, from, to, last time)
+    for t, frame in zip(matches.t_ns.tolist(), matches.matches, strict=True):
+        for tid, g in sorted(frame.items(), key=lambda kv: kv[1]):
+            prev = last.get(g)
+            if prev is not None and prev[0] != tid:
+                raw.append((t, g, prev[0], tid, prev[1]))
+            last[g] = (tid, t)
+    by_pair: dict[tuple[int, int], list[int]] = {}
+    for t, _, a, b, _ in raw:
+        by_pair.setdefault((a, b), []).append(t)
+    ex_ns, new_ns, end_ns = round(exchange_s * 1e9), round(new_s * 1e9), round(ended_s * 1e9)
+    out = []
+    for t, g, a, b, t_last in raw:
+        if any(abs(t2 - t) <= ex_ns for t2 in by_pair.get((b, a), ())):
+            cause = "exchange"
+        elif b in life and life[b][0] >= t - new_ns:
+            cause = "reborn" if a in life and life[a][1] <= t + end_ns else "new_track"
+        else:
+            cause = "takeover"
+        out.append(IdSwitch(t, g, a, b, t_last, cause))
+    return out
+
+
+def switch_cause_counts(switches: Iterable[IdSwitch] | Iterable[Mapping[str, int]]) -> dict[str, int]:
+    """``{cause: count}`` over :data:`SWITCH_CAUSES` (zeros included), of switches or of earlier counts summed."""
+    total: Counter[str] = Counter({c: 0 for c in SWITCH_CAUSES})
+    for s in switches:
+        if isinstance(s, IdSwitch):
+            total[s.cause] += 1
+        else:
+            total.update(s)
+    return {c: total[c] for c in SWITCH_CAUSES}
