@@ -221,6 +221,28 @@ def test_track_and_eval_a_simulated_crossing(tmp_path):
     assert "Traceback" not in bad.stderr
 
 
+def test_eval_names_the_cause_of_each_id_switch(tmp_path):
+    # two people 4 m apart walk 10 s; the tracks exchange them at 5 s: two switches, both an exchange, each listed
+    truth, tracks = ["t,id,x,y"], ["t,id,x,y,vx,vy,class,situation,sensors,score"]
+    for k in range(100):
+        t = 100.0 + 0.1 * k
+        for person, y in ((1, 0.0), (2, 4.0)):
+            truth.append(f"{t:.1f},{person},{0.1 * k:.2f},{y}")
+            track = person if k < 50 else 3 - person
+            tracks.append(f"{t:.1f},{track},{0.1 * k + 0.05:.2f},{y},1.0,0.0,person,noncorrelated,laser,1.0")
+    (tmp_path / "truth.csv").write_text("\n".join(truth) + "\n")
+    (tmp_path / "tracks.csv").write_text("\n".join(tracks) + "\n")
+    out = tmp_path / "m.json"
+    printed = run("eval", str(tmp_path / "tracks.csv"), str(tmp_path / "truth.csv"), "-o", str(out)).stdout
+    assert "ID switches by cause: exchange 2, reborn 0, new track 0, takeover 0" in printed
+    result = json.loads(out.read_text())
+    assert result["metrics"]["id_switches"] == 2
+    assert result["id_switch_causes"] == {"exchange": 2, "reborn": 0, "new_track": 0, "takeover": 0}
+    assert sorted((w["gt_id"], w["from_track"], w["to_track"]) for w in result["id_switches"]) == [(1, 1, 2),
+                                                                                                   (2, 2, 1)]
+    assert {w["t_ns"] for w in result["id_switches"]} == {105_000_000_000}
+
+
 def test_eval_of_mot_files_reproduces_tud_campus(shared_data, tmp_path):
     tud = shared_data / "mot_reference/motmetrics_tud/TUD-Campus"
     out = tmp_path / "m.json"

@@ -1029,6 +1029,16 @@ def eval_(
         metrics = evaluate_floor(scored, states, threshold_m=threshold)
         console.print(metrics_table({label: metrics}, title=f"tracking, match within {threshold:g} m"))
         result["metrics"] = metrics.to_dict()
+        if metrics.id_switches:  # what kind of identity errors: where to look, and what would cure them
+            from .eval import frame_matches, id_switch_causes, switch_cause_counts
+
+            switches = id_switch_causes(frame_matches(scored, states, threshold_m=threshold), states)
+            counts = switch_cause_counts(switches)
+            console.print("ID switches by cause: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in counts.items())
+                          + " (fusiontrack.eval.switches)")
+            result["id_switch_causes"] = counts
+            result["id_switches"] = [{"t_ns": w.t_ns, "gt_id": w.gt_id, "from_track": w.from_track,
+                                      "to_track": w.to_track, "cause": w.cause} for w in switches]
         if events and frames and "situation" in frames[0].attributes:
             from .sim.situations import situation_events
 
