@@ -20,6 +20,10 @@ another (no parallel load on the timings):
 The comparison is paired: for the same seed, fusion's laser tracker draws the random stream laser-only's draws,
 so where the camera changes nothing the two give the same tracks, and every difference is the camera's doing.
 
+A second table splits the ID switches by cause (:mod:`fusiontrack.eval.switches`): two tracks exchanging their people
+(what the classifiers at a meeting can fix), a track lost and reborn (re-identification's case), a new track taking a
+person from a track that drifted off, an older track taking over.
+
 Columns: MOTA, IDF1, IDF1 ceiling, HOTA (floor, match 0.5 m), ID switches, merge/split events resolved correctly
 out of all true ones, and time per frame. The IDF1 ceiling (:attr:`fusiontrack.eval.Metrics.idf1_ceiling`) is the
 highest IDF1 the same track positions could score with perfect identities: IDF1 above it needs better detection
@@ -75,7 +79,14 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from fusiontrack.eval import evaluate_floor, truth_at
+from fusiontrack.eval import (
+    SWITCH_CAUSES,
+    evaluate_floor,
+    frame_matches,
+    id_switch_causes,
+    switch_cause_counts,
+    truth_at,
+)
 from fusiontrack.fusion import track_fused
 from fusiontrack.io.recording import Recording
 from fusiontrack.sim.scenario import load_scenario
@@ -165,7 +176,8 @@ def run_sim(name: str, seconds: float, seed: int, tmp: Path, bias: bool = True, 
 
     def score(states: list[TrackState], seconds_spent: float, truth: list[GroundTruth] = gt) -> dict[str, Any]:
         m = evaluate_floor(truth, states, 0.5)
-        return {"m": m, "splits": splits_resolved(gt, truth_events, states, t_warm),
+        causes = switch_cause_counts(id_switch_causes(frame_matches(truth, states, 0.5), states))
+        return {"m": m, "splits": splits_resolved(gt, truth_events, states, t_warm), "causes": causes,
                 "ms_per_frame": 1e3 * seconds_spent / n_frames}
 
     # each system ``repeat`` times, interleaved (a burst of load on this shared machine hits all three alike);
@@ -278,6 +290,18 @@ def main() -> None:
                           str(s["idsw"]), f"{ok}/{n} ({100 * ok / max(n, 1):.0f} %)", f"{s['ms']:.2f}", *ratios, "",
                           style="bold")
     console.print(table)
+
+    why = Table(title="ID switches by cause (summed over seeds; fusiontrack.eval.switches)", header_style="bold",
+                caption="exchange: two tracks exchanged their people (what appearance at a meeting can fix); reborn: "
+                        "the person's track ended and a new one took over; new track: a new one took the person from "
+                        "a track that drifted off; takeover: an older track took the person")
+    for col in ("scenario", "system", "IDSW", *(c.replace("_", " ") for c in SWITCH_CAUSES)):
+        why.add_column(col, justify="left" if col in ("scenario", "system") else "right")
+    for name in ("crowd", "groups"):
+        for key, label in systems:
+            c = switch_cause_counts(r[key]["causes"] for (n, _), r in results.items() if n == name)
+            why.add_row(name, label, str(sum(c.values())), *(str(c[k]) for k in SWITCH_CAUSES))
+    console.print(why)
 
     use = Table(title="fusion: what the camera was used for (summed over seeds)", header_style="bold")
     for col in ("scenario", "laser steps", "images read", "training frames", "score maps", "splits",
