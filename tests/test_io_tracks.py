@@ -99,12 +99,24 @@ def test_tracks_csv_from_tracks_is_time_ordered(tmp_path: Path) -> None:
         assert all(records_equal(x, _csv_fields(y)) for x, y in zip(a.states, b.states, strict=True))
 
 
+def test_another_trackers_minimal_csv_reads(tmp_path: Path) -> None:
+    # t (or t_ns), id, x, y is enough (names in any case, extra columns ignored): the rest takes TrackState's defaults
+    p = tmp_path / "theirs.csv"
+    p.write_text("T,ID,X,Y,confidence\n1.5,7,2.0,-1.0,0.9\n1.6,7,2.1,-1.0,0.8\n")
+    a, b = read_tracks_csv(p)
+    assert (a.t_ns, a.track_id, tuple(a.position_m)) == (1_500_000_000, 7, (2.0, -1.0))
+    assert (a.cls, a.situation, a.sensors, a.score, tuple(a.velocity_mps)) == ("person", "noncorrelated", (), 1.0,
+                                                                                (0.0, 0.0))
+    p.write_text("t_ns,id,x,y\n1700000000123456789,3,0,0\n")
+    assert read_tracks_csv(p)[0].t_ns == 1_700_000_000_123_456_789  # exact, beyond float64's integers
+
+
 def test_tracks_csv_errors(tmp_path: Path) -> None:
     p = tmp_path / "tracks.csv"
     with pytest.raises(RecordingError, match="no such file"):
         read_tracks_csv(p)
-    p.write_text("t,id,x,y\n1.0,1,0,0\n")
-    with pytest.raises(RecordingError, match=r"tracks\.csv, line 1: header lacks \['vx'"):
+    p.write_text("t,id,x\n1.0,1,0\n")
+    with pytest.raises(RecordingError, match=r"tracks\.csv, line 1: header lacks \['y'\]"):
         read_tracks_csv(p)
     header = ",".join(TRACKS_CSV_COLUMNS) + "\n"
     good = "1.000000000,1,0.5,0.5,0,0,person,noncorrelated,laser|cam,1.0\n"

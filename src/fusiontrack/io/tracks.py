@@ -43,7 +43,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from ..errors import ConfigError, RecordingError
-from ..types import Event, GroundTruth, ObjectClass, Track, TrackState
+from ..types import Event, GroundTruth, ObjectClass, Situation, Track, TrackState
 from .csvtable import read_numeric_table
 
 __all__ = [
@@ -202,6 +202,10 @@ def _data_rows(reader: Any, path: Path, n_fields: int) -> Iterator[tuple[int, li
 def read_tracks_csv(path: str | Path, sensor: str = "tracker") -> list[TrackState]:
     """Read a world-frame tracks CSV back into :class:`TrackState` records, in file order.
 
+    A ``tracks.csv`` of ``fusiontrack track`` (:data:`TRACKS_CSV_COLUMNS`), or another tracker's output with at
+    least ``t`` (s) or ``t_ns``, ``id``, ``x``, ``y`` (m): the other columns are optional (``vx``, ``vy`` 0;
+    ``class`` person; ``situation`` noncorrelated; ``sensors`` none; ``score`` 1), names in any case, others ignored.
+
     Parameters
     ----------
     path : str or Path
@@ -214,31 +218,38 @@ def read_tracks_csv(path: str | Path, sensor: str = "tracker") -> list[TrackStat
         Missing file, missing columns, or a bad row (file and line named).
     """
     path = Path(path)
-    what = "a tracks CSV with header " + ",".join(TRACKS_CSV_COLUMNS)
+    what = "a tracks CSV with header " + ",".join(TRACKS_CSV_COLUMNS) + " (at least t or t_ns, id, x, y)"
     states: list[TrackState] = []
     with _open_for_reading(path, what) as f:
         reader = csv.reader(f)
         header = next(reader, None)
         if header is None:
             raise RecordingError(f"{path}: empty file (expected {what})")
-        names = [h.strip() for h in header]
-        missing = [c for c in TRACKS_CSV_COLUMNS if c not in names]
+        names = [h.strip().lower() for h in header]
+        time_col = "t" if "t" in names else "t_ns"
+        missing = [c for c in (time_col, "id", "x", "y") if c not in names]
         if missing:
             raise RecordingError(f"{path}, line 1: header lacks {missing} (expected {what})")
-        col = {c: names.index(c) for c in TRACKS_CSV_COLUMNS}
+        col = {c: names.index(c) for c in (time_col, *TRACKS_CSV_COLUMNS[1:]) if c in names}
+
+        def get(row: list[str], name: str, default: str) -> str:
+            k = col.get(name)
+            return row[k].strip() if k is not None else default
+
         for lineno, row in _data_rows(reader, path, len(names)):
             try:
-                sensors = row[col["sensors"]].strip()
+                sensors = get(row, "sensors", "")
+                t_text = row[col[time_col]].strip()
                 states.append(TrackState(
-                    t_ns=parse_time_s(row[col["t"]]),
+                    t_ns=parse_time_s(t_text) if time_col == "t" else int(t_text),
                     sensor=sensor,
                     track_id=int(row[col["id"]]),
                     position_m=(float(row[col["x"]]), float(row[col["y"]])),
-                    velocity_mps=(float(row[col["vx"]]), float(row[col["vy"]])),
-                    cls=row[col["class"]].strip(),
-                    situation=row[col["situation"]].strip(),
+                    velocity_mps=(float(get(row, "vx", "0")), float(get(row, "vy", "0"))),
+                    cls=get(row, "class", ObjectClass.PERSON),
+                    situation=get(row, "situation", Situation.NONCORRELATED),
                     sensors=tuple(sensors.split("|")) if sensors else (),
-                    score=float(row[col["score"]]),
+                    score=float(get(row, "score", "1")),
                 ))
             except (ValueError, TypeError) as err:
                 raise RecordingError(f"{path}, line {lineno}: {err}") from err
