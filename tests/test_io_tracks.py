@@ -103,7 +103,7 @@ def test_another_trackers_minimal_csv_reads(tmp_path: Path) -> None:
     # t (or t_ns), id, x, y is enough (names in any case, extra columns ignored): the rest takes TrackState's defaults
     p = tmp_path / "theirs.csv"
     p.write_text("T,ID,X,Y,confidence\n1.5,7,2.0,-1.0,0.9\n1.6,7,2.1,-1.0,0.8\n")
-    a, b = read_tracks_csv(p)
+    a, _ = read_tracks_csv(p)
     assert (a.t_ns, a.track_id, tuple(a.position_m)) == (1_500_000_000, 7, (2.0, -1.0))
     assert (a.cls, a.situation, a.sensors, a.score, tuple(a.velocity_mps)) == ("person", "noncorrelated", (), 1.0,
                                                                                 (0.0, 0.0))
