@@ -111,6 +111,33 @@ def test_another_trackers_minimal_csv_reads(tmp_path: Path) -> None:
     assert read_tracks_csv(p)[0].t_ns == 1_700_000_000_123_456_789  # exact, beyond float64's integers
 
 
+@pytest.mark.parametrize("reader", ["tracks", "truth"])
+def test_times_in_the_wrong_unit_or_beyond_int64_are_named_not_a_traceback(tmp_path: Path, reader: str) -> None:
+    # epoch nanoseconds or milliseconds under a ``t`` (seconds) header overflowed numpy's int64 time arrays in eval
+    read = read_tracks_csv if reader == "tracks" else read_ground_truth_csv
+    p = tmp_path / "times.csv"
+    for value in ("1700000000365854208", "1700000000365"):
+        p.write_text(f"t,id,x,y\n1.0,1,0,0\n{value},1,0,0\n")
+        with pytest.raises(RecordingError, match=rf"times\.csv, line 3: t = {value} s is past the year 2262: "
+                                                 r"milliseconds or nanoseconds\?"):
+            read(p)
+    p.write_text("t_ns,id,x,y\n99999999999999999999,1,0,0\n")
+    with pytest.raises(RecordingError, match=r"line 2: t_ns = 99999999999999999999 is beyond 64-bit nanoseconds"):
+        read(p)
+    # a float's noise (Python's repr, pandas) is read to the nearest nanosecond, by both readers alike
+    p.write_text("t,id,x,y\n0.1,1,0,0\n0.30000000000000004,1,0.1,0\n1e-1,2,5,5\n")
+    times = [s.t_ns for s in read(p)] if reader == "tracks" else [f.t_ns for f in read(p) for _ in f.ids]
+    assert sorted(times) == [100_000_000, 100_000_000, 300_000_000]
+
+
+def test_jsonl_time_beyond_int64_is_named(tmp_path: Path) -> None:
+    p = tmp_path / "t.jsonl"
+    write_jsonl(p, [TrackState(1_000, "laser", 1, np.zeros(2))])
+    p.write_text(p.read_text().replace('"t_ns":1000', '"t_ns":99999999999999999999'))
+    with pytest.raises(RecordingError, match=r"t\.jsonl, line 1: t_ns = 99999999999999999999 is beyond 64-bit"):
+        read_jsonl(p)
+
+
 def test_tracks_csv_errors(tmp_path: Path) -> None:
     p = tmp_path / "tracks.csv"
     with pytest.raises(RecordingError, match="no such file"):

@@ -147,6 +147,36 @@ def parse_time_s(text: str) -> int:
     return sign * (int(whole or "0") * 1_000_000_000 + int((frac[:9] or "0").ljust(9, "0")))
 
 
+_NS_LIMIT = 2**63  # int64 nanoseconds: up to the year 2262 from 1970
+
+
+def _time_ns(text: str, column: str) -> int:
+    """A CSV time cell as integer nanoseconds: ``t`` in decimal seconds (exact to 9 decimals; a float's noise such
+    as ``0.30000000000000004`` rounded to the nearest ns), ``t_ns`` in whole nanoseconds. ValueError naming the
+    column for what is not a time, and for a value past int64 nanoseconds (year 2262): in ``t``, most likely
+    milliseconds or nanoseconds."""
+    text = text.strip()
+    if column == "t_ns":
+        t_ns = int(text)
+    else:
+        try:
+            t_ns = parse_time_s(text)
+        except ValueError:
+            try:
+                value = float(text)
+            except ValueError:
+                raise ValueError(f"t: not a number of seconds: {text!r}") from None
+            if not math.isfinite(value):
+                raise ValueError(f"t: expected finite seconds, got {text!r}") from None
+            t_ns = round(value * 1e9) if abs(value) < _NS_LIMIT / 1e9 else _NS_LIMIT
+        if abs(t_ns) >= _NS_LIMIT:
+            raise ValueError(f"t = {text} s is past the year 2262: milliseconds or nanoseconds? t is in seconds "
+                             f"(name a column of nanoseconds t_ns)")
+    if abs(t_ns) >= _NS_LIMIT:
+        raise ValueError(f"t_ns = {text} is beyond 64-bit nanoseconds (the year 2262)")
+    return t_ns
+
+
 def write_tracks_csv(path: str | Path, tracks: Iterable[TrackState | Track]) -> int:
     """Write track states as the world-frame tracks CSV (see the module docstring).
 
@@ -239,9 +269,8 @@ def read_tracks_csv(path: str | Path, sensor: str = "tracker") -> list[TrackStat
         for lineno, row in _data_rows(reader, path, len(names)):
             try:
                 sensors = get(row, "sensors", "")
-                t_text = row[col[time_col]].strip()
                 states.append(TrackState(
-                    t_ns=parse_time_s(t_text) if time_col == "t" else int(t_text),
+                    t_ns=_time_ns(row[col[time_col]], time_col),
                     sensor=sensor,
                     track_id=int(row[col["id"]]),
                     position_m=(float(row[col["x"]]), float(row[col["y"]])),
@@ -297,14 +326,7 @@ def read_ground_truth_csv(path: str | Path, sensor: str = "ground_truth") -> lis
         col = {c: names.index(c) for c in (time_col, "id", "x", "y", "class") if c in names}
         for lineno, row in _data_rows(reader, path, len(names)):
             try:
-                text = row[col[time_col]].strip()
-                if time_col == "t_ns":
-                    t_ns = int(text)
-                else:
-                    try:
-                        t_ns = parse_time_s(text)
-                    except ValueError:  # 1e-1, or a float's noise (0.30000000000000004): to the nearest ns
-                        t_ns = round(float(text) * 1e9)
+                t_ns = _time_ns(row[col[time_col]], time_col)
                 tid_text = row[col["id"]].strip()
                 tid = _whole_number(tid_text)
                 if tid is None or tid < 0:
@@ -613,6 +635,16 @@ def _record_from_json(obj: dict[str, Any]) -> JsonRecord:
     raise ValueError(f"unknown record type {kind!r} (expected TrackState, Event or GroundTruth)")
 
 
+def _checked_times(obj: dict[str, Any]) -> None:
+    """ValueError for a ``t_ns`` / ``t_end_ns`` beyond int64 nanoseconds (numpy's time arrays overflowed on it)."""
+    for key in ("t_ns", "t_end_ns"):
+        v = obj.get(key)
+        if v is None or isinstance(v, bool) or not isinstance(v, int | float):
+            continue  # (missing, or not a number: the record says so)
+        if abs(v) >= _NS_LIMIT:
+            raise ValueError(f"{key} = {v} is beyond 64-bit nanoseconds (the year 2262)")
+
+
 def write_jsonl(path: str | Path, records: Iterable[JsonRecord]) -> int:
     """Write TrackState, Event and GroundTruth records as JSON lines, one object per record, in order.
 
@@ -654,6 +686,7 @@ def read_jsonl(path: str | Path) -> list[JsonRecord]:
                 obj = json.loads(line, parse_constant=lambda c: _NONFINITE[c])
                 if not isinstance(obj, dict):
                     raise ValueError(f"expected a JSON object, got {type(obj).__name__}")
+                _checked_times(obj)
                 records.append(_record_from_json(obj))
             except json.JSONDecodeError as err:
                 raise RecordingError(f"{path}, line {lineno}: not JSON ({err.msg} at column {err.colno})") from err
