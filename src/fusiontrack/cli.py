@@ -1049,7 +1049,9 @@ def eval_(
             result["situations"] = {k: v.to_dict() if hasattr(v, "to_dict") else vars(v) for k, v in scores.items()}
     if output is not None:
         output.parent.mkdir(parents=True, exist_ok=True)
-        output.write_text(json.dumps(result, indent=2, default=float))
+        from .io.datafile import json_text
+
+        output.write_text(json_text(result))
         console.print(f"metrics: {output}")
 
 
@@ -1459,7 +1461,9 @@ def demo(
         "preview": {"path": str(output / "preview.mp4"), "frames": real_video.frames,
                     "size_px": list(real_video.size_px), "tracks": len({s.track_id for s in real_states})},
     }
-    (output / "summary.json").write_text(json.dumps(summary, indent=2))
+    from .io.datafile import json_text
+
+    (output / "summary.json").write_text(json_text(summary))
     console.print(f"previews: {output / 'crowd.mp4'} ({crowd_video.frames} frames), {output / 'preview.mp4'} "
                   f"({real_video.frames} frames); summary: {output / 'summary.json'}")
 

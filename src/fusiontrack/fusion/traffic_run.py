@@ -14,7 +14,6 @@ Writes into the output folder:
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -22,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from ..io.datafile import json_text
 from ..io.recording import Recording
 from ..io.tracks import write_jsonl, write_tracks_csv
 from ..types import GroundTruth
@@ -127,7 +127,7 @@ def run_traffic(recording: str | Path, output: str | Path, *, geometry: Any = No
 
         drawn = render_preview([recording], output / "tracks.mp4", tracks=states)
         summary["video"] = {"path": "tracks.mp4", "frames": drawn.frames}
-    (output / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
+    (output / "summary.json").write_text(json_text(summary, default=_json_default))
     _report(output / "report.html", recording, result, summary)
     return summary
 

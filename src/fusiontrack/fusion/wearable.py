@@ -26,7 +26,6 @@ seen by an RGB-D camera keeps an uncorrected dead reckoning in the phone's own f
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
 import time
 from collections import Counter
@@ -39,6 +38,7 @@ import numpy as np
 
 from ..errors import ConfigError, RecordingError
 from ..inertial.step_length import StepLengthModel, load_step_model
+from ..io.datafile import json_text
 from ..types import Event
 from .wearable_assoc import AssocParams, Tracklet, associate, link_tracklets
 from .wearable_correct import Correction, correct_phone
@@ -362,7 +362,7 @@ def run_wearable(recording_path: str | Path, out_dir: str | Path, **options: Any
                            "total": round(time.perf_counter() - t0, 3)}}
     path = Path(out_dir) / "summary.json"
     try:
-        path.write_text(json.dumps(summary, indent=2))
+        path.write_text(json_text(summary))
     except OSError as err:
         raise RecordingError(f"{path}: cannot write the summary ({err.strerror or err})") from err
     summary["files"]["summary"] = str(path)

@@ -13,7 +13,7 @@ from typing import Any
 
 from ..errors import ConfigError
 
-__all__ = ["read_json", "read_toml"]
+__all__ = ["json_text", "read_json", "read_toml"]
 
 
 def _text(path: Path, what: str) -> str:
@@ -41,3 +41,21 @@ def read_json(path: str | Path, what: str) -> Any:
         return json.loads(_text(path, what))
     except json.JSONDecodeError as err:
         raise ConfigError(f"{path}: not JSON: {err}") from err
+
+
+def _finite(obj: Any) -> Any:
+    if isinstance(obj, float):
+        return obj if obj == obj and obj not in (float("inf"), float("-inf")) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_finite(v) for v in obj]
+    if hasattr(obj, "item") and getattr(obj, "ndim", None) == 0:  # numpy scalars
+        return _finite(obj.item())
+    return obj
+
+
+def json_text(obj: Any, indent: int | None = 2, default: Any = float) -> str:
+    """Strict JSON of a summary or metrics mapping: NaN and infinities (a recall with nothing to recall, an unknown
+    rate) as ``null`` (``json.dumps`` writes ``NaN``, which no other JSON reader accepts), numpy scalars as numbers."""
+    return json.dumps(_finite(obj), indent=indent, allow_nan=False, default=default)
