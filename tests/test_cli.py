@@ -51,6 +51,23 @@ def test_info_on_a_one_sample_imu_csv_is_valid_json(shared_data, tmp_path):
     assert "nan" not in run("info", str(one)).stdout.lower()
 
 
+def test_convert_keeps_every_topic_of_a_simulated_recording(tmp_path):
+    """A simulated camera's label images are Image records of the camera too: convert wrote them onto its image
+    topic (twice the images, no labels). Every topic keeps its messages, also through a clock correction."""
+    rec = tmp_path / "sim"
+    run("simulate", "crossing", "--seconds", "2", "--seed", "2", "-o", str(rec))
+    cfg = tmp_path / "pipeline.toml"
+    cfg.write_text('[sensors.camera_0]\nkind = "camera"\ntopic = "/camera_0/image"\nclock_offset_ms = 7.0\n')
+    with Recording(rec) as r:
+        before = {t: info.count for t, info in r.topics().items() if info.convertible}
+    assert before["/camera_0/labels"] == before["/camera_0/image"] > 0
+    for name, extra in (("plain", []), ("corrected", ["-c", str(cfg)])):
+        run("convert", str(rec), "-o", str(tmp_path / name), *extra)
+        with Recording(tmp_path / name) as r:
+            after = {t: info.count for t, info in r.topics().items()}
+        assert after == before, name
+
+
 def test_convert_to_mcap_keeps_every_scan(shared_data, tmp_path):
     bag = shared_data / DEMO
     run("convert", str(bag), "-o", str(tmp_path / "mcap"))

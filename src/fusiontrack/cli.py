@@ -6,12 +6,13 @@ Errors a user can cause end as one line on stderr and a non-zero exit code, neve
 
 from __future__ import annotations
 
+import collections
 import json
 import logging
 import math
 import os
 import sys
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated, Any
@@ -335,10 +336,29 @@ def convert(
         poses = _pose_transforms(rec, cfg.laser_poses(), [t.topic for t in selected], time_source)
         with RecordingWriter(output, storage=storage) as writer, progress() as bar:  # type: ignore[arg-type]
             n = writer.write_all(poses)
-            stream = _track(rec.messages(topic, time_source=time_source), bar, "converting", total)  # type: ignore[arg-type]
+            # each record keeps the topic it was read from (a simulated camera's label images are Image records
+            # of the camera's sensor too: by type alone they were written onto its image topic). The synchroniser
+            # may put a record through a clock correction (a new record) and reorders only across times: the
+            # topics of one (type, sensor, corrected time) go in a queue, in the order read
+            read_topics: dict[tuple[type, str, int], collections.deque[str]] = {}
+            corrections = sync.clock_corrections_ns
+
+            def tagged(stream: Iterable[tuple[str, Any]]) -> Iterator[Any]:
+                for tp, m in stream:
+                    key = (type(m), m.sensor, m.t_ns + corrections.get(m.sensor, 0))
+                    read_topics.setdefault(key, collections.deque()).append(tp)
+                    yield m
+
+            stream = _track(tagged(rec.topic_messages(topic, time_source=time_source)), bar, "converting", total)  # type: ignore[arg-type]
             replaced = {tf.child_frame for tf in poses}
-            n += writer.write_all(m for m in sync(stream)
-                                  if not (isinstance(m, Transform) and m.static and m.child_frame in replaced))
+            for m in sync(stream):
+                queue = read_topics.get((type(m), m.sensor, m.t_ns))
+                tp = queue.popleft() if queue else None
+                if queue is not None and not queue:
+                    del read_topics[(type(m), m.sensor, m.t_ns)]
+                if not (isinstance(m, Transform) and m.static and m.child_frame in replaced):
+                    writer.write(m, topic=tp)
+                    n += 1
     dropped = sum(sync.dropped.values())
     console.print(f"wrote {n} messages to {output}"
                   + (f" ({dropped} dropped as too far out of order)" if dropped else "")

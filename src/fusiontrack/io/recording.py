@@ -429,7 +429,20 @@ class Recording:
         stop_ns: int | None = None,
         time_source: TimeSource = "header",
     ) -> Iterator[Message]:
-        """Converted records in log-time order.
+        """Converted records in log-time order (:meth:`topic_messages` without the topics)."""
+        for _, record in self.topic_messages(topics, start_ns=start_ns, stop_ns=stop_ns, time_source=time_source):
+            yield record
+
+    def topic_messages(
+        self,
+        topics: Iterable[str] | None = None,
+        *,
+        start_ns: int | None = None,
+        stop_ns: int | None = None,
+        time_source: TimeSource = "header",
+    ) -> Iterator[tuple[str, Message]]:
+        """``(topic, record)``: converted records in log-time order, each with the topic it was read from (a
+        sensor's records of one type may come from several topics: a simulated camera's images and labels).
 
         With ``topics=None`` every topic of a convertible type is read (others are skipped).
         A message that cannot be deserialised or converted is skipped and counted; one warning with
@@ -469,7 +482,7 @@ class Recording:
                             fast = with_time(fast, log_ns)
                     else:
                         fast = with_time(fast, log_ns)
-                    yield fast
+                    yield conn.topic, fast
                     continue
                 msg = reader.deserialize(raw, conn.msgtype)
                 t_ns = log_ns
@@ -485,9 +498,10 @@ class Recording:
                 reasons.setdefault(conn.topic, str(err) or type(err).__name__)
                 continue
             if isinstance(out, list):  # a TFMessage: one record per transform, each stamped by its own header
-                yield from out if time_source == "header" else (with_time(r, log_ns) for r in out)
+                for r in out:
+                    yield conn.topic, r if time_source == "header" else with_time(r, log_ns)
             else:
-                yield out
+                yield conn.topic, out
         if skipped:
             log.warning("skipped %d unreadable message(s): %s", sum(skipped.values()),
                         "; ".join(f"{t}: {n} (first: {reasons[t]})" for t, n in skipped.items()))
