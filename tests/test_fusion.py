@@ -869,20 +869,22 @@ class _DroppingBank(_FakeBank):
         self.trained.difference_update([ids] if isinstance(ids, int) else ids)
 
 
-def _reborn_run(prefers_lost: int, born_at_m: tuple[float, float] = (6.0, ROWS_Y[1]), kind: str = "lost"):
-    """Three people (rows 0-2) tracked as 1, 2, 3; the laser loses 2 (row 1) and 0.2 s later a new track 4
-    is born at ``born_at_m`` (its detections are those of row 1's person). ``prefers_lost``: the row whose person
-    2's classifier learnt. Returns the tracker and the output ids by row at every step."""
+def _reborn_run(prefers_lost: int, born_at_m: tuple[float, float] = (6.0, ROWS_Y[1]), kind: str = "lost",
+                lost_at_m: tuple[float, float] = (6.0, ROWS_Y[1]), lost_k: int = 5):
+    """Three people (rows 0-2) tracked as 1, 2, 3; the laser last sees 2 (row 1) at step 4 and gives it up at step
+    ``lost_k`` where it coasted it to, ``lost_at_m``; a new track 4 is born at ``born_at_m`` 0.24 s after that
+    sighting (declared at step 12; its detections are those of row 1's person). ``prefers_lost``: the row whose
+    person 2's classifier learnt. Returns the tracker and the output ids by row at every step."""
     from fusiontrack.types import Event
 
     t0, dt = 1_000_000_000, 40_000_000
     times = [t0 + k * dt for k in range(60)]
-    lost = Event(times[4], "laser", kind, times[5], position_m=np.array([6.0, ROWS_Y[1]]), track_ids=(2,))
+    lost = Event(times[4], "laser", kind, times[lost_k], position_m=np.asarray(lost_at_m, float), track_ids=(2,))
     born = Event(times[10], "laser", "born", times[12], position_m=np.asarray(born_at_m, float), track_ids=(4,))
     script = {}
     for k, t in enumerate(times):
         ids = (1, 2, 3) if k < 5 else (1, None, 3) if k < 12 else (1, 4, 3)
-        script[t] = (ids, [lost] if k == 5 else [born] if k == 12 else [])
+        script[t] = (ids, [lost] * (k == lost_k) + [born] * (k == 12))
     laser = _ScriptedLaser(script)
     bank = _DroppingBank({1: 0, 2: prefers_lost, 3: 2, 4: 1}, {1, 2, 3})
     trk = _three_people(laser, bank, _Frames())
@@ -915,6 +917,21 @@ def test_reborn_track_takes_back_the_lost_identity_when_the_lost_classifier_know
     # an exchange decided later on the output ids reaches the laser tracker's ids
     assert trk._exchange(2, 3, times[-1], times[-1], -1.0)
     assert trk.laser.calls[-1] == (4, 3)
+
+
+def test_a_track_coasted_away_before_it_was_given_up_is_reached_from_its_last_sighting():
+    # the laser coasted track 2 1.6 m on for 1 s before giving it up (after track 4 was born where 2 was last seen,
+    # 0.24 s after that sighting): walking reach counts the coasting too (1 m + 2 m/s x (0.24 + 1.04) s), so 4
+    # claims 2 and takes it back. Measured from the coasted position with the 0.24 s alone (1.48 m) it was out of
+    # reach, and the identity was lost.
+    trk, out, _ = _reborn_run(prefers_lost=1, lost_at_m=(7.6, ROWS_Y[1]), lost_k=30)
+    assert trk.stats.reid_claims == 1
+    assert trk.stats.reids == 1
+    assert out[-1] == {ROWS_Y[0]: 1, ROWS_Y[1]: 2, ROWS_Y[2]: 3}
+    # the same coasting, but the new track 3.7 m from where the coasting ended: beyond 3.56 m, no claim
+    trk, out, _ = _reborn_run(prefers_lost=1, born_at_m=(3.9, ROWS_Y[1]), lost_at_m=(7.6, ROWS_Y[1]), lost_k=30)
+    assert trk.stats.reid_claims == 0
+    assert 4 in out[-1].values()
 
 
 @pytest.mark.parametrize(("prefers_lost", "born_at_m", "kind"), [

@@ -208,9 +208,11 @@ class FusionParams:
         on such slivers].
     reid : bool
         Re-identification of reborn tracks [RECON, extends B17]: when the laser loses a track and a new one is
-        born within ``reid_s`` (before or after) within reach of where it was lost (``reid_slack_m`` +
-        ``reid_speed_mps`` x the gap), the lost track's classifier (kept ``reid_s`` after the loss) scores the new
-        track's box on clear camera images (as for a check: ``max_overlap``, ``check_visible``), beside the other
+        born within ``reid_s`` (before or after) of its last sighting, within reach of where it was lost
+        (``reid_slack_m`` + ``reid_speed_mps`` x (the gap + how long the laser coasted the lost track before giving
+        it up: the position it reports is where it coasted it to)), the lost track's classifier (kept ``reid_s``
+        after the loss) scores the new track's box on clear camera images (as for a check: ``max_overlap``,
+        ``check_visible``), beside the other
         candidates' and the nearby live tracks' classifiers; the new track takes the lost identity (back to its
         birth, :attr:`FusionTracker.relabels`) once, over ``reid_frames`` images or more, the lost classifier's
         mean confidence is at least ``reid_min`` and beats every other's by ``reid_margin``.
@@ -922,12 +924,17 @@ class FusionTracker:
         """Let new track ``q`` (first detected at ``first_ns`` at ``q_pos``) claim lost id ``lost`` if within
         reach in time and space."""
         p = self.params
-        seen_ns, _, pos = self._lost[lost]
+        seen_ns, lost_ns, pos = self._lost[lost]
         gap_s = (first_ns - seen_ns) / 1e9
         span = self._span.get(lost)
         if q == lost or gap_s > p.reid_s or gap_s < -p.reid_s or (span is not None and span[0] >= first_ns):
             return
-        if not np.hypot(*(q_pos - pos)) <= p.reid_slack_m + p.reid_speed_mps * abs(gap_s):
+        # ``pos`` is where the laser tracker had coasted the track to when it gave up on it, ``lost_ns``, not where
+        # it was last seen: the person is within walking reach of the last sighting, which is within the coasting's
+        # length of ``pos`` [without the coasting's part, a track coasted 1 s away from where a new one was born
+        # 0.1 s after the last sighting was out of reach]
+        coast_s = max(lost_ns - seen_ns, 0) / 1e9
+        if not np.hypot(*(q_pos - pos)) <= p.reid_slack_m + p.reid_speed_mps * (abs(gap_s) + coast_s):
             return
         c = self._claims.get(q)
         if c is None:
