@@ -265,6 +265,23 @@ def test_eval_names_the_cause_of_each_id_switch(tmp_path):
     assert {w["t_ns"] for w in result["id_switches"]} == {105_000_000_000}
 
 
+def test_eval_refuses_truth_without_people_and_warns_of_tracks_without_positions(tmp_path):
+    truth = tmp_path / "road.csv"
+    truth.write_text("t,id,x,y,class\n1.0,1,0,0,car\n1.0,2,5,0,bicycle\n1.1,1,1,0,car\n")
+    tracks = tmp_path / "tracks.csv"
+    tracks.write_text("t,id,x,y\n1.0,1,0,0\n1.1,1,1,0\n")
+    bad = subprocess.run([sys.executable, "-m", "fusiontrack", "eval", str(tracks), str(truth)], capture_output=True,
+                         text=True, timeout=120)
+    assert bad.returncode != 0  # it scored GT 0, MOTA 0 without a word
+    assert "the truth holds no people (car 2, bicycle 1)" in bad.stderr
+    assert "--pipeline traffic" in bad.stderr
+    people = tmp_path / "people.csv"
+    people.write_text(truth.read_text().replace("car", "person").replace("bicycle", "person"))
+    tracks.write_text("t,id,x,y\n1.0,1,nan,nan\n1.1,1,1,0\n")
+    out = run("eval", str(tracks), str(people))
+    assert "1 of 2 track states have no floor position" in " ".join((out.stdout + out.stderr).split())
+
+
 def test_eval_of_mot_files_reproduces_tud_campus(shared_data, tmp_path):
     tud = shared_data / "mot_reference/motmetrics_tud/TUD-Campus"
     out = tmp_path / "m.json"

@@ -1046,6 +1046,7 @@ def eval_(
                                   f"period of a {gt_topic} frame (check --time)")
             label += f" at {at}"
             result["at"] = {"topic": at, "frames": len(scored), "of": len(frames)}
+        _check_people(ground_truth, scored, tracks, states)
         metrics = evaluate_floor(scored, states, threshold_m=threshold)
         console.print(metrics_table({label: metrics}, title=f"tracking, match within {threshold:g} m"))
         result["metrics"] = metrics.to_dict()
@@ -1073,6 +1074,32 @@ def eval_(
 
         output.write_text(json_text(result))
         console.print(f"metrics: {output}")
+
+
+def _check_people(ground_truth: Path, frames: Sequence[Any], tracks: Path, states: Sequence[Any]) -> None:
+    """``eval`` scores people on the floor: truth without any (a road's vehicles) is an error that says where
+    vehicles are scored (it scored GT 0, MOTA 0 without a word); tracks without any person, or without floor
+    positions (an uncalibrated camera's), are warned of (every truth position then counts as missed)."""
+    import collections
+
+    def counts(c: collections.Counter[str]) -> str:
+        return ", ".join(f"{k} {v}" for k, v in c.most_common())
+
+    truth = collections.Counter(c for f in frames for c in (f.classes or ("person",) * len(f.ids)))
+    if truth and not truth.get("person"):
+        raise ConfigError(f"{ground_truth}: the truth holds no people ({counts(truth)}): eval scores people on the "
+                          f"floor; vehicles are scored by `fusiontrack track --pipeline traffic` (its summary.json "
+                          f"and report)")
+    if not states:
+        return
+    kinds = collections.Counter(str(s.cls) for s in states)
+    if not kinds.get("person"):
+        log.warning("%s: no track state is a person (%s): every person in the truth counts as missed",
+                    _tracks_file(tracks), counts(kinds))
+    lost = sum(1 for s in states if not (math.isfinite(s.position_m[0]) and math.isfinite(s.position_m[1])))
+    if lost:
+        log.warning("%s: %d of %d track states have no floor position (NaN: tracks of a camera without a "
+                    "calibration?); they count as false positives", _tracks_file(tracks), lost, len(states))
 
 
 def _topic_times(path: Path, topic: str, time_source: str) -> list[int]:
