@@ -1351,6 +1351,11 @@ class FusionTracker:
 # --------------------------------------------------------------------------------------------------
 
 
+def _shown(path: str | Path | Sequence[str | Path]) -> str:
+    """A recording's path, or several, as a user wrote them (not a list's repr)."""
+    return str(path) if isinstance(path, str | Path) else ", ".join(str(p) for p in path)
+
+
 def _image_topic(rec: Any, camera_topic: str | None) -> str | None:
     """The image topic to fuse: ``camera_topic``, else the recording's only camera image topic, else None."""
     topics = rec.topic_types()
@@ -1572,13 +1577,13 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         image_topic = _image_topic(rec, camera_topic)
         cam_sensor = "" if image_topic is None else rec.sensor_of(image_topic)
         if image_topic is None:
-            log.warning("%s: no camera image topic: the people pipeline tracks with the lasers only", path)
+            log.warning("%s: no camera image topic: the people pipeline tracks with the lasers only", _shown(path))
         elif camera is None:
             given = dict(camera_poses or {})
             cam2world = given.get(image_topic, given.get(cam_sensor))
             if given and cam2world is None:
                 log.warning("%s: the camera poses given (%s) are not of camera %r (%s): its pose is read from "
-                            "/tf_static", path, ", ".join(sorted(given)), cam_sensor, image_topic)
+                            "/tf_static", _shown(path), ", ".join(sorted(given)), cam_sensor, image_topic)
             first = next((m for m in rec.messages([image_topic]) if isinstance(m, Image)), None)
             if first is not None:
                 camera = camera_from_recording(rec, cam_sensor, first.frame_id, world_frame=world_frame,
@@ -1651,14 +1656,14 @@ def _learn_bias(path: str | Path, cam_sensor: str, image_topic: str | None, came
     seconds = (bias.history.t_ns[-1] - bias.history.t_ns[0]) / 1e9 if len(bias.history) else 0.0
     if bias.updates == 0:
         log.warning("%s: camera bias not learnt: nobody was seen by both %s and the lasers in %.1f s; the camera "
-                    "is used as calibrated", path, cam_sensor, seconds)
+                    "is used as calibrated", _shown(path), cam_sensor, seconds)
     elif not bias.settled:
         spread = np.degrees(bias.spread_rad)
         wander = f"wandering by {spread:.2f}" if np.isfinite(spread) else "too few updates"
-        log.warning("%s: the bias of %s had not settled after %d updates (%.1f s): %.3f deg, %s; %s", path, cam_sensor,
-                    bias.updates, seconds, np.degrees(bias.bias_rad), wander,
+        log.warning("%s: the bias of %s had not settled after %d updates (%.1f s): %.3f deg, %s; %s", _shown(path),
+                    cam_sensor, bias.updates, seconds, np.degrees(bias.bias_rad), wander,
                     "applied" if bias.applied else "the camera is used as calibrated")
     else:
-        log.info("%s: bias of %s settled at %.3f deg after %d updates (%.1f s)", path, cam_sensor,
+        log.info("%s: bias of %s settled at %.3f deg after %d updates (%.1f s)", _shown(path), cam_sensor,
                  np.degrees(bias.bias_rad), bias.updates, seconds)
     return bias

@@ -61,7 +61,8 @@ class _Model(BaseModel):
 
 class TimingConfig(_Model):
     rate_hz: float = Field(gt=0)
-    clock_offset_ms: float = 0.0
+    # a day either way: ROS stamps hold int32 seconds (the year 2038), and a sensor clock days off is a typo
+    clock_offset_ms: float = Field(0.0, ge=-86_400_000.0, le=86_400_000.0)
     jitter_ms: float = Field(0.0, ge=0)
     latency_ms: float = Field(2.0, ge=0)
     drop_probability: float = Field(0.0, ge=0, le=1)
