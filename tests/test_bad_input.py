@@ -132,6 +132,13 @@ def test_config_errors_name_the_field():
         parse_config({"sensors": {"l": {"kind": "laser", "topc": "/scan"}}})
 
 
+def test_a_sensor_clock_offset_beyond_a_day_is_refused_where_it_is_written():
+    # 1e12 ms: the stamps passed int32 seconds and the writer raised struct.error, leaving a half-written recording
+    scenario = {"lasers": [{"name": "laser_0", "x_m": 0.0, "y_m": 0.0, "rate_hz": 25.0, "clock_offset_ms": 1e12}]}
+    with pytest.raises(ConfigError, match=r"scene\.toml: lasers\.0\.clock_offset_ms: .*86400000"):
+        parse_scenario(scenario, "scene.toml")
+
+
 def test_an_unknown_key_is_named_beside_the_known_ones():
     # the right spelling is in the message, at every depth: top-level table, sensor key, pose key
     with pytest.raises(ConfigError, match=r"trackin: unknown table \(known: .*\btracking\b"):
