@@ -58,6 +58,25 @@ def test_a_recording_given_twice_is_refused(tmp_path):
         assert rec.message_count == 6
 
 
+def test_two_recordings_of_one_topic_over_the_same_time_are_warned_of(tmp_path, caplog):
+    """Two scenes given together (two simulations start at the same instant) interleave their scans into one
+    stream: tracked as one world. A warning names both; the next piece of a recording gives none."""
+    def scans(start_ns: int, r: float) -> list[LaserScan]:
+        return [LaserScan(start_ns + i * 100_000_000, "laser", "laser", -1.0, 0.01, 0.02, 5.0, np.full(21, r))
+                for i in range(1, 4)]
+
+    write_recording(tmp_path / "a", scans(0, 1.0))
+    write_recording(tmp_path / "b", scans(50_000_000, 2.0))  # the same topic, overlapping in time
+    write_recording(tmp_path / "c", scans(400_000_000, 3.0))  # after a: its next piece
+    with caplog.at_level("WARNING"), Recording([tmp_path / "a", tmp_path / "b"]):
+        pass
+    assert "both hold /laser/scan over the same time" in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING"), Recording([tmp_path / "a", tmp_path / "c"]):
+        pass
+    assert "both hold" not in caplog.text
+
+
 @pytest.mark.parametrize("keep", [0.5, 0.01])
 def test_truncated_ros1_bag(shared_data, tmp_path, keep):
     src = shared_data / DEMO

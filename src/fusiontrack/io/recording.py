@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import ast
 import heapq
+import itertools
 import json
 import logging
 import re
@@ -152,6 +153,23 @@ def _check_not_copies(paths: Sequence[Path], readers: Sequence[AnyReader]) -> No
         seen[key] = path
 
 
+def _warn_shared_topics(paths: Sequence[Path], readers: Sequence[AnyReader]) -> None:
+    """A warning for two inputs that hold the same sensor topic over overlapping times: read as one, their messages
+    interleave (two scenes merged: the tracks of both worlds in one). Consecutive pieces of a recording do not
+    overlap; the bags of two machines recorded together hold different sensors (``/tf`` aside)."""
+    spans = []
+    for path, reader in zip(paths, readers, strict=True):
+        topics = {c.topic for c in reader.connections if c.msgcount and c.topic not in ("/tf", "/tf_static")}
+        if topics:
+            spans.append((path, reader.start_time, reader.end_time, topics))
+    for (pa, a0, a1, ta), (pb, b0, b1, tb) in itertools.combinations(spans, 2):
+        both = ta & tb
+        if both and a0 < b1 and b0 < a1:
+            shown = ", ".join(sorted(both)[:3]) + (", ..." if len(both) > 3 else "")
+            log.warning("%s and %s both hold %s over the same time: read together, their messages interleave "
+                        "(two recordings of different scenes? give them one at a time)", pa, pb, shown)
+
+
 class Recording:
     """One or several recording files read as a single time-ordered stream.
 
@@ -200,6 +218,7 @@ class Recording:
                 self._register_custom(reader, path)
                 sensor_map.update(self._stored_sensor_map(reader))
             _check_not_copies(self.paths, self._readers)
+            _warn_shared_topics(self.paths, self._readers)
         except BaseException:
             self.close()
             raise
