@@ -156,6 +156,10 @@ def test_a_sensor_clock_offset_beyond_a_day_is_refused_where_it_is_written():
     scenario = {"lasers": [{"name": "laser_0", "x_m": 0.0, "y_m": 0.0, "rate_hz": 25.0, "clock_offset_ms": 1e12}]}
     with pytest.raises(ConfigError, match=r"scene\.toml: lasers\.0\.clock_offset_ms: .*86400000"):
         parse_scenario(scenario, "scene.toml")
+    # a name makes topics and files: one with a space or a slash gave invalid topics and a file error
+    scenario = {"lasers": [{"name": "laser 0/x", "x_m": 0.0, "y_m": 0.0, "rate_hz": 25.0}]}
+    with pytest.raises(ConfigError, match=r"scene\.toml: lasers\.0\.name: .*pattern.*'laser 0/x'"):
+        parse_scenario(scenario, "scene.toml")
 
 
 def test_an_unknown_key_is_named_beside_the_known_ones():

@@ -270,3 +270,19 @@ def test_every_traffic_key_of_a_pipeline_file_is_read():
 def test_an_unknown_camera_setting_is_named(road):
     with pytest.raises(ConfigError, match=r"traffic\.camera: unknown key\(s\) \['background_every'\]"):
         track_traffic(road[0], params=TrafficParams(camera={"background_every": 4}))
+
+
+def test_the_geometry_given_is_the_one_scored_on(simulated, tmp_path):
+    """A recording whose simulated world has no road (people crossing a room), watched through a road TOML: the
+    scoring took the world's roads and failed after tracking ("roads: the scene has no road", no summary)."""
+    from fusiontrack.fusion.traffic_run import run_traffic
+
+    path = simulated("crossing", seconds=3, seed=0)
+    road = tmp_path / "road.toml"
+    road.write_text('[[roads]]\nname = "main"\ncenterline = [[-60.0, 0.0], [60.0, 0.0]]\nwidth_m = 14.0\n\n'
+                    '[[lanes]]\nname = "east_0"\nroad = "main"\ncenterline = [[-60.0, -5.25], [60.0, -5.25]]\n'
+                    'width_m = 3.5\n')
+    summary = run_traffic(path, tmp_path / "out", geometry=road, video=False,
+                          params=TrafficParams(workers=0))
+    assert (tmp_path / "out" / "summary.json").is_file()
+    assert "metrics" in summary

@@ -14,6 +14,7 @@ Writes into the output folder:
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -26,6 +27,8 @@ from ..io.recording import Recording
 from ..io.tracks import write_jsonl, write_tracks_csv
 from ..types import GroundTruth
 from .traffic import VARIANTS, TrafficParams, TrafficResult, track_traffic
+
+log = logging.getLogger(__name__)
 
 __all__ = ["evaluate_traffic", "run_traffic"]
 
@@ -115,12 +118,21 @@ def run_traffic(recording: str | Path, output: str | Path, *, geometry: Any = No
         rows = [{k: None if isinstance(v, float) and math.isnan(v) else v for k, v in r.items()}  # JSON null
                 for r in residual_table(calibration)]
         summary["calibration"] = {"source": calibration.source, "residuals": rows}
+    # scored on the roads watched: the --geometry's (it was ignored here: a recording whose simulated world has no
+    # road then failed after tracking, "roads: the scene has no road"), else the simulated world's, else everywhere
     area = None
     world = recording / "ground_truth" / "world.json"
-    if world.is_file():
+    source = geometry if geometry is not None else world if world.is_file() else None
+    if source is not None:
+        from ..errors import ConfigError
+        from ..scene import load_road_geometry
         from .traffic import _roi_polygon, roads_of
 
-        area = _roi_polygon(roads_of(world), 3.0)
+        try:
+            area = _roi_polygon(roads_of(load_road_geometry(source) if isinstance(source, str | Path)
+                                         and source != world else source), 3.0)
+        except ConfigError as err:  # a world without roads (a people scene): scored everywhere
+            log.info("%s: traffic scored over the whole area (%s)", recording, err)
     summary.update(evaluate_traffic(result, recording, area=area, rate_hz=p.rate_hz))
     if video:
         from ..viz.preview import render_preview

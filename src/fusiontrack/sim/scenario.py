@@ -59,6 +59,10 @@ class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
+SENSOR_NAME = r"^[A-Za-z][A-Za-z0-9_]*$"
+"""A sensor's name makes its topics (``/<name>/scan``) and file names: a ROS name token (letters, digits, _)."""
+
+
 class TimingConfig(_Model):
     rate_hz: float = Field(gt=0)
     # a day either way: ROS stamps hold int32 seconds (the year 2038), and a sensor clock days off is a typo
@@ -82,7 +86,7 @@ class TimingConfig(_Model):
 
 
 class LaserConfig(TimingConfig):
-    name: str = Field(min_length=1)
+    name: str = Field(pattern=SENSOR_NAME)
     x_m: float
     y_m: float
     yaw_deg: float = 0.0
@@ -101,7 +105,7 @@ class LaserConfig(TimingConfig):
 
 
 class CameraConfig(TimingConfig):
-    name: str = Field(min_length=1)
+    name: str = Field(pattern=SENSOR_NAME)
     position_m: tuple[float, float, float]
     yaw_deg: float
     pitch_deg: float = Field(ge=-89, le=89)
@@ -132,7 +136,7 @@ class CameraConfig(TimingConfig):
 
 
 class PhoneConfig(TimingConfig):
-    name: str = Field(min_length=1)
+    name: str = Field(pattern=SENSOR_NAME)
     rate_hz: float = Field(100.0, gt=0)
     mount_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
     accel_bias_mps2: tuple[float, float, float] = (0.05, -0.03, 0.04)
