@@ -299,3 +299,25 @@ def test_a_recordings_camera_info_without_intrinsics_is_named(scene, tmp_path, f
         w.write(CameraInfo(10**9, "camera_0", "camera_0", 640, 480, np.where(K != 0, fx, 0.0)))
     with pytest.raises(RecordingError, match=r"rec: the CameraInfo of camera 'camera_0' holds no usable intrinsics"):
         calibrate_from_points(pipeline, "camera_0", csv, reference="laser_0", recording=tmp_path / "rec", write=False)
+
+
+def test_a_ros_named_camera_info_is_found_beside_the_image_topic(scene, tmp_path):
+    """A pipeline file naming the camera by its ROS image topic (no info_topic) and a recording of another tool:
+    its CameraInfo sits beside the image topic, as ROS names them. It was looked up by the pipeline file's sensor
+    name only ("no CameraInfo of camera 'head'")."""
+    from fusiontrack.io.writer import RecordingWriter
+    from fusiontrack.types import CameraInfo
+
+    pipeline = tmp_path / "pipeline.toml"
+    pipeline.write_text(PIPELINE + '\n[sensors.head]\nkind = "camera"\ntopic = "/hero/rgb/image_raw"\n',
+                        encoding="utf-8")
+    csv = tmp_path / "points.csv"
+    rows = "\n".join(",".join(f"{v:.6f}" for v in row) for row in np.hstack([scene["points"], scene["pixels"]]))
+    csv.write_text("x_m,y_m,z_m,u_px,v_px\n" + rows + "\n", encoding="utf-8")
+    info = "/hero/rgb/camera_info"
+    with RecordingWriter(tmp_path / "rec") as w:  # (sensor = topic: as a foreign recording reads)
+        w.write(CameraInfo(10**9, info, info, 640, 480, K, DIST), topic=info)
+    result = calibrate_from_points(pipeline, "head", csv, reference="laser_0", recording=tmp_path / "rec",
+                                   write=False)
+    true = camera_pose_from_cam2world(scene["camera"].cam2world)
+    assert abs(result.pose.yaw_deg - true.yaw_deg) < 0.01

@@ -103,8 +103,11 @@ def read_control_points(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     return table.values[:, :3].copy(), table.values[:, 3:].copy()
 
 
-def camera_info_from_recording(path: str | Path, camera: str, info_topic: str = "") -> CameraInfo:
-    """The first ``CameraInfo`` of ``camera`` (or on ``info_topic``) in a recording.
+def camera_info_from_recording(path: str | Path, camera: str, info_topic: str = "",
+                               image_topic: str = "") -> CameraInfo:
+    """The first ``CameraInfo`` of ``camera`` (or on ``info_topic``; else of the sensor ``camera``, else beside its
+    ``image_topic`` as ROS names them: :meth:`~fusiontrack.io.recording.Recording.camera_info_topics`) in a
+    recording.
 
     Raises
     ------
@@ -112,11 +115,13 @@ def camera_info_from_recording(path: str | Path, camera: str, info_topic: str = 
         The recording has none.
     """
     with Recording(path) as rec:
-        wanted = [info_topic] if info_topic else rec.camera_info_topics(camera)
+        wanted = [info_topic] if info_topic else (rec.camera_info_topics(camera)
+                                                  or (rec.camera_info_topics(image_topic) if image_topic else []))
         info = next((m for m in rec.messages(wanted) if isinstance(m, CameraInfo)), None) if wanted else None
     where = f" on {info_topic}" if info_topic else ""
     if info is None:
-        raise RecordingError(f"{path}: no CameraInfo of camera {camera!r}{where}")
+        raise RecordingError(f"{path}: no CameraInfo of camera {camera!r}{where} (name its topic with info_topic in "
+                             f"the camera's [sensors] table)")
     K = np.asarray(info.K, dtype=np.float64)
     if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
         fx, fy = (K[0, 0], K[1, 1]) if K.shape == (3, 3) else (np.nan, np.nan)
@@ -200,7 +205,10 @@ def calibrate_from_points(pipeline: str | Path, camera: str, points: str | Path,
     if intrinsics is None:
         if recording is None:
             raise ConfigError("intrinsics: give the camera's intrinsics or a recording with its CameraInfo")
-        intrinsics = camera_info_from_recording(recording, camera, cfg.sensors[camera].info_topic)
+        sensor = cfg.sensors[camera]
+        # the camera's CameraInfo: on its info_topic, else beside its image topic as ROS names them (by the pipeline
+        # file's sensor name alone, only a fusiontrack recording's sensor map found it)
+        intrinsics = camera_info_from_recording(recording, camera, sensor.info_topic, image_topic=sensor.topic)
     K, dist = (intrinsics.K, intrinsics.D) if isinstance(intrinsics, CameraInfo) else intrinsics
     pts, pix = read_control_points(points)
     result = solve_pnp(pts, pix, K, dist, ransac=ransac, ransac_threshold_px=ransac_threshold_px)

@@ -287,6 +287,8 @@ class Recording:
             return infos
         images = [t for t, m in types.items() if m in (IMAGE, COMPRESSED_IMAGE)
                   and (t == camera or self.sensor_of(t) == camera)]
+        if camera.startswith("/") and camera not in images:  # an image topic, even one this recording lacks
+            images.append(camera)
         near = []
         for t, m in types.items():
             if m == CAMERA_INFO:
