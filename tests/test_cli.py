@@ -293,6 +293,11 @@ def test_eval_of_mot_files_reproduces_tud_campus(shared_data, tmp_path):
                                "--at", "/camera_0/image"], capture_output=True, text=True, timeout=60)
     assert boxes_at.returncode != 0
     assert "--at: only for floor-plane tracks" in boxes_at.stderr
+    floor_options = subprocess.run([sys.executable, "-m", "fusiontrack", "eval", str(tud / "test.txt"),
+                                    str(tud / "gt.txt"), "--threshold", "3", "--time", "log"], capture_output=True,
+                                   text=True, timeout=60)
+    assert floor_options.returncode != 0  # (ignored without a word before)
+    assert "--threshold, --time: only for floor-plane tracks" in floor_options.stderr
 
 
 def test_track_and_eval_the_real_outdoor_bag(outdoor_bag, tmp_path):

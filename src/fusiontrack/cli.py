@@ -1025,6 +1025,11 @@ def eval_(
         result["camera"] = cam
         result["metrics"] = metrics.to_dict()
     elif tracks.suffix == ".txt":
+        floor_only = [o for o, used in (("--threshold", threshold != 0.5), ("--topic", topic is not None),
+                                        ("--time", time_source != "header")) if used]
+        if floor_only:  # (they were ignored without a word)
+            raise ConfigError(f"{', '.join(floor_only)}: only for floor-plane tracks (MOTChallenge boxes are matched "
+                              f"by IoU >= 0.5, frame by frame)")
         metrics = evaluate_mot_files(ground_truth, tracks)
         console.print(metrics_table({tracks.name: metrics}))
         result["metrics"] = metrics.to_dict()
