@@ -553,3 +553,22 @@ def test_illumination_test_looks_at_the_whole_frame_not_the_window():
     det(noisy((background * 0.6).astype(np.uint8)), t_ns=t)
     assert det.last_foreground.relearning
     assert det.n_illumination_events == 1
+
+
+def test_another_tools_camera_is_found_beside_its_camera_info(tmp_path):
+    """A recording of another tool names a camera by its CameraInfo topic: its colour images are found beside it as
+    ROS names them (not its depth images). It failed with 'no image topic of camera /ns/rgb/camera_info'."""
+    from fusiontrack.io.writer import RecordingWriter
+    from fusiontrack.types import CameraInfo
+    from fusiontrack.vision.vehicles import _image_topic
+
+    K = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
+    with RecordingWriter(tmp_path / "rec") as w:
+        for topic in ("/hero/rgb/image_raw", "/hero/depth_registered/image", "/other/image_raw"):
+            w.write(Image(10**9, topic, topic, np.zeros((4, 4, 3), np.uint8), "bgr8"), topic=topic)
+        info = "/hero/rgb/camera_info"
+        w.write(CameraInfo(10**9, info, info, 640, 480, K), topic=info)
+    with Recording(tmp_path / "rec") as rec:
+        assert _image_topic(rec, "/hero/rgb/camera_info") == "/hero/rgb/image_raw"
+        with pytest.raises(RecordingError, match="no image topic of camera '/nobody/camera_info'"):
+            _image_topic(rec, "/nobody/camera_info")

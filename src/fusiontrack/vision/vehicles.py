@@ -1502,8 +1502,14 @@ class CameraVehicleDetector:
 
 def _image_topic(rec: Any, camera: str) -> str:
     topics = rec.topic_types()
-    found = [t for t, i in topics.items() if i in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
-             and rec.sensor_of(t) == camera and not t.endswith(("/labels", "/depth"))]
+    images = [t for t, i in topics.items() if i in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+              and not t.endswith(("/labels", "/depth"))]
+    found = [t for t in images if rec.sensor_of(t) == camera]
+    if not found and camera.startswith("/"):
+        # another tool's recording: a camera is known by its CameraInfo topic (/ns/camera_info); its images are
+        # beside it as ROS names them (/ns/image_raw, /ns/image_raw/compressed), not depth images
+        ns = camera.rsplit("/", 1)[0] if camera.endswith("camera_info") else camera
+        found = [t for t in images if t.startswith(ns + "/") and "depth" not in t[len(ns):]]
     if not found:
         raise RecordingError(f"{rec.paths[0]}: no image topic of camera {camera!r}")
     return sorted(found, key=lambda s: (not s.endswith("/image"), s))[0]
