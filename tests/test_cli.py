@@ -241,6 +241,12 @@ def test_track_and_eval_a_simulated_crossing(tmp_path):
     assert bad.returncode != 0
     assert "/camera_9/image" in bad.stderr
     assert "Traceback" not in bad.stderr
+    # tracked again into the same folder without a video: the first run's video, which no longer shows these
+    # tracks, is removed (and said), the rest rewritten
+    again = run("track", str(rec), "-o", str(out), "--no-video").stdout
+    assert "this one did not: tracks.mp4" in " ".join(again.split())
+    assert not (out / "tracks.mp4").exists()
+    assert (out / "tracks.csv").stat().st_size > 0
 
 
 def test_eval_names_the_cause_of_each_id_switch(tmp_path):

@@ -12,6 +12,7 @@ import logging
 import math
 import os
 import sys
+import time
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
@@ -609,13 +610,16 @@ def track(
                           f"{pipeline})")
     if pipeline == "people-camera" and seed is not None:
         raise ConfigError("--seed: the people-camera pipeline draws no random numbers (it has no particle filter)")
+    started = time.time()
     if pipeline == "wearable":
         _track_wearable(recordings, output, config=config, seed=seed)
+        _drop_stale_outputs(output, started)
         return
     if pipeline == "traffic":
         _track_traffic(recordings, output, config=config, geometry=geometry, rules=rules, compare=compare,
                        video=video, time_source=time_source, seed=seed, calibration=calibration, scene=scene,
                        workers=workers)
+        _drop_stale_outputs(output, started)
         return
     seed = 0 if seed is None else seed
     if pipeline == "people-camera":
@@ -625,6 +629,7 @@ def track(
         _track_camera(recordings, output, detections=detections, detection_scale=detection_scale,
                       min_score=min_score, camera_topic=camera_topic, max_frames=max_frames,
                       time_source=time_source, video=video)
+        _drop_stale_outputs(output, started)
         return
     camera_only = {"--detections": detections is not None, "--detection-scale": detection_scale != 1.0,
                    "--min-score": min_score is not None,
@@ -719,6 +724,29 @@ def track(
                                       time_source=time_source, clock_corrections_ns=cfg.clock_corrections_ns(),
                                       lasers=lasers, laser_poses=poses or None)
             console.print(f"overlay: {output / 'overlay.mp4'} ({ov.frames} frames)")
+    _drop_stale_outputs(output, started)
+
+
+TRACK_OUTPUTS = ("tracks.csv", "tracks.jsonl", "tracks.mp4", "overlay.mp4", "bias.csv", "tracks_mot.txt",
+                 "summary.json", "events.jsonl", "report.html", "trajectories.csv", "boxes.csv", "people.csv")
+"""The files some ``track`` pipeline writes into its output folder."""
+
+
+def _drop_stale_outputs(output: Path, started: float) -> None:
+    """After a run into a folder used before: the outputs of the earlier run that this one did not rewrite (a video
+    kept by --no-video, another pipeline's overlay or bias history) are removed, so that none is taken for this
+    run's; said in one line. Only after the run succeeded: a failed run loses nothing."""
+    stale = []
+    for name in TRACK_OUTPUTS:
+        f = output / name
+        try:
+            if f.is_file() and f.stat().st_mtime < started - 1.0:
+                f.unlink()
+                stale.append(name)
+        except OSError as err:
+            log.warning("%s: an output of an earlier run could not be removed (%s)", f, err.strerror or err)
+    if stale:
+        console.print(f"removed from {output} what an earlier run wrote and this one did not: {', '.join(stale)}")
 
 
 def _track_wearable(sources: list[Path], output: Path, *, config: Path | None, seed: int | None) -> None:
