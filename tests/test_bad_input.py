@@ -234,9 +234,13 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         (["track", "{demo}", "-o", "{out}", "-c", "{tracking_typo}", "--pipeline", "wearable"],
          "tracking_typo.toml: [tracking]: unknown"),
         # numbers that are not finite, and a negative seed: the setting named, no traceback
-        (["simulate", "crowd", "-o", "{out}", "--seconds", "inf"], "scenario.duration_s: Input should be a finite"),
+        # (named by the option the user typed, not the field behind it)
+        (["simulate", "crowd", "-o", "{out}", "--seconds", "inf"], "--seconds: expected a duration > 0, got inf"),
+        (["simulate", "crowd", "-o", "{out}", "--seconds", "0"], "--seconds: expected a duration > 0, got 0"),
         (["simulate", "crowd", "-o", "{out}", "--seconds", "1", "--seed", "-1"],
-         "scenario.seed: Input should be greater than or equal to 0"),
+         "--seed: expected an integer >= 0, got -1"),
+        (["track", "{demo}", "-o", "{out}", "--tracker", "bogus"], "--tracker: expected 'pf' or 'kalman'"),
+        (["eval", "{demo}", "{demo}", "--threshold", "0"], "--threshold: expected a distance > 0"),
         (["track", "{demo}", "-o", "{out}", "-c", "{offset_inf}"],
          "offset_inf.toml: sensors.l0.clock_offset_ms: Input should be a finite number"),
         (["track", "{demo}", "-o", "{out}", "-c", "{tracking_pf}", "--tracker", "kalman"],

@@ -497,6 +497,10 @@ def simulate(
     from .sim.simulator import simulate as run_simulation
 
     _no_folder_under_a_file(output, "--output")  # (said before the simulation, not after it)
+    if seconds is not None and not (math.isfinite(seconds) and seconds > 0):  # (named by the option, not the field)
+        raise ConfigError(f"--seconds: expected a duration > 0, got {seconds:g}")
+    if seed is not None and seed < 0:
+        raise ConfigError(f"--seed: expected an integer >= 0, got {seed}")
     sc = load_scenario(scenario).with_overrides(seconds=seconds, seed=seed, settings=_parse_settings(set_))
     duration = sc.config.scenario.duration_s
     with progress() as bar:
@@ -587,6 +591,8 @@ def track(
 
     if pipeline not in PIPELINES:
         raise ConfigError(f"--pipeline: expected one of {', '.join(PIPELINES)}, got {pipeline!r}")
+    if tracker_kind not in ("pf", "kalman"):
+        raise ConfigError(f"--tracker: expected 'pf' or 'kalman', got {tracker_kind!r}")
     _check_time(time_source)
     _out_folder(output)
     traffic_only = {"--geometry": geometry is not None, "--rules": rules is not None, "--compare": compare,
@@ -1035,6 +1041,8 @@ def eval_(
     from .eval import evaluate_floor, evaluate_mot_files, metrics_table, situation_accuracy, situation_table, truth_at
 
     _check_time(time_source)
+    if not (math.isfinite(threshold) and threshold > 0):  # (named by the option, not the library's threshold_m)
+        raise ConfigError(f"--threshold: expected a distance > 0 in metres, got {threshold:g}")
     if output is not None:
         _out_file(output, "metrics.json")
     result: dict[str, Any] = {}
