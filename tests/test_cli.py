@@ -304,6 +304,17 @@ def test_eval_of_mot_files_reproduces_tud_campus(shared_data, tmp_path):
                                    text=True, timeout=60)
     assert floor_options.returncode != 0  # (ignored without a word before)
     assert "--threshold, --time: only for floor-plane tracks" in floor_options.stderr
+    # floor tracks against a MOTChallenge gt file, or --camera with one: what fits what (it said "not a recording")
+    floor = tmp_path / "floor.csv"
+    floor.write_text("t,id,x,y\n1.0,1,0,0\n")
+    for args, said in (([str(floor), str(tud / "gt.txt")], "is a MOTChallenge gt file (image boxes by frame)"),
+                       ([str(tud / "test.txt"), str(tud / "gt.txt"), "--camera", "camera_0"],
+                        "--camera: scores against a simulated recording's")):
+        r = subprocess.run([sys.executable, "-m", "fusiontrack", "eval", *args], capture_output=True, text=True,
+                           timeout=60)
+        assert r.returncode != 0
+        assert said in " ".join(r.stderr.split())
+        assert "not a recording" not in r.stderr
 
 
 def test_track_and_eval_the_real_outdoor_bag(outdoor_bag, tmp_path):

@@ -1051,6 +1051,18 @@ def eval_(
         raise boxes_at
     if ground_truth.suffix == ".txt" and tracks.is_dir() and (tracks / "tracks_mot.txt").is_file():
         tracks = tracks / "tracks_mot.txt"  # a people-camera folder scored against a MOTChallenge gt file
+    if ground_truth.suffix == ".txt":  # (it was opened as a recording: "Unrecognized storage format '.txt'")
+        if camera is not None:
+            raise ConfigError(f"--camera: scores against a simulated recording's /ground_truth/CAMERA boxes; "
+                              f"{ground_truth} is a MOTChallenge gt file (its boxes are matched frame by frame)")
+        if tracks.suffix != ".txt":
+            raise ConfigError(f"{ground_truth} is a MOTChallenge gt file (image boxes by frame): it scores "
+                              f"MOTChallenge result rows (a .txt, or the tracks_mot.txt of `track --pipeline "
+                              f"people-camera`, or its folder); {tracks} is not one (floor tracks are scored against "
+                              f"a recording with ground truth or a CSV of floor positions)")
+    if ground_truth.suffix.lower() == ".csv" and camera is not None:
+        raise ConfigError(f"--camera: scores image boxes against a simulated recording's /ground_truth/CAMERA; "
+                          f"{ground_truth} is a CSV of floor positions")
     image = _eval_image_boxes(tracks, ground_truth, camera, time_source)
     if at is not None and image is not None:  # a people-camera output found by its folder
         raise boxes_at
@@ -1177,6 +1189,8 @@ def _eval_image_boxes(tracks: Path, recording: Path, camera: str | None, time_so
         return {s.camera for s in states} - {""}
 
     folder = tracks if tracks.is_dir() else tracks.parent
+    if recording.suffix.lower() == ".csv" and tracks.suffix != ".txt":
+        return None  # floor positions as truth: a people-camera folder is scored by its tracks' floor positions
     mot_vs_recording = tracks.suffix == ".txt" and recording.suffix != ".txt"
     if mot_vs_recording and recording.is_dir() and not (recording / "metadata.yaml").is_file():
         raise ConfigError(f"{recording}: a folder that is not a recording (no metadata.yaml); MOTChallenge rows are "
