@@ -13,7 +13,7 @@ import math
 import os
 import sys
 import time
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated, Any
@@ -320,7 +320,7 @@ def convert(
     each scanner's frame, replacing the recording's own for those frames: the new recording is posed as the
     pipeline file poses it, without the file."""
     from .io.recording import Recording
-    from .io.sync import Synchronizer
+    from .io.sync import Synchronizer, with_time
     from .io.writer import RecordingWriter
     from .types import Transform
 
@@ -338,32 +338,30 @@ def convert(
         with RecordingWriter(output, storage=storage) as writer, progress() as bar:  # type: ignore[arg-type]
             n = writer.write_all(poses)
             # each record keeps the topic it was read from (a simulated camera's label images are Image records
-            # of the camera's sensor too: by type alone they were written onto its image topic). The synchroniser
-            # may put a record through a clock correction (a new record) and reorders only across times: the
-            # topics of one (type, sensor, corrected time) go in a queue, in the order read
-            read_topics: dict[tuple[type, str, int], collections.deque[str]] = {}
-            corrections = sync.clock_corrections_ns
-
-            def tagged(stream: Iterable[tuple[str, Any]]) -> Iterator[Any]:
-                for tp, m in stream:
-                    key = (type(m), m.sensor, m.t_ns + corrections.get(m.sensor, 0))
-                    read_topics.setdefault(key, collections.deque()).append(tp)
-                    yield m
-
-            stream = _track(tagged(rec.topic_messages(topic, time_source=time_source)), bar, "converting", total)  # type: ignore[arg-type]
+            # of the camera's sensor too: by type alone they were written onto its image topic), carried through
+            # the synchroniser with it (its clock corrections, held leaps and drops act on the pair)
+            stream = _track((_Topical(m.t_ns, m.sensor, m, tp)
+                             for tp, m in rec.topic_messages(topic, time_source=time_source)),
+                            bar, "converting", total)  # type: ignore[arg-type]
             replaced = {tf.child_frame for tf in poses}
-            for m in sync(stream):
-                queue = read_topics.get((type(m), m.sensor, m.t_ns))
-                tp = queue.popleft() if queue else None
-                if queue is not None and not queue:
-                    del read_topics[(type(m), m.sensor, m.t_ns)]
+            for item in sync(stream):
+                m = item.record if item.t_ns == item.record.t_ns else with_time(item.record, item.t_ns)
                 if not (isinstance(m, Transform) and m.static and m.child_frame in replaced):
-                    writer.write(m, topic=tp)
+                    writer.write(m, topic=item.topic)
                     n += 1
     dropped = sum(sync.dropped.values())
     console.print(f"wrote {n} messages to {output}"
                   + (f" ({dropped} dropped as too far out of order)" if dropped else "")
                   + (f" ({sum(rec.skipped.values())} unreadable skipped)" if rec.skipped else ""))
+
+
+class _Topical:
+    """A record and the topic it was read from, as the synchroniser sees a record (``t_ns``, ``sensor``)."""
+
+    __slots__ = ("record", "sensor", "t_ns", "topic")
+
+    def __init__(self, t_ns: int, sensor: str, record: Any, topic: str) -> None:
+        self.t_ns, self.sensor, self.record, self.topic = t_ns, sensor, record, topic
 
 
 def _pose_transforms(rec: Any, laser_poses: Mapping[str, Any], topics: Sequence[str], time_source: str
