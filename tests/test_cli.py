@@ -281,10 +281,16 @@ def test_track_and_eval_a_simulated_crossing(tmp_path):
     assert "Traceback" not in bad.stderr
     # tracked again into the same folder without a video: the first run's video, which no longer shows these
     # tracks, is removed (and said), the rest rewritten
+    # (a file of the user's there, even one named as another pipeline's output, is never touched)
+    (out / "people.csv").write_text("mine\n")
     again = run("track", str(rec), "-o", str(out), "--no-video").stdout
     assert "this one did not: tracks.mp4" in " ".join(again.split())
     assert not (out / "tracks.mp4").exists()
     assert (out / "tracks.csv").stat().st_size > 0
+    assert (out / "people.csv").read_text() == "mine\n"
+    third = run("track", str(rec), "-o", str(out), "--no-video").stdout  # nothing stale: nothing said or removed
+    assert "removed" not in third
+    assert {p.name for p in out.iterdir()} == {"tracks.csv", "tracks.jsonl", "people.csv", ".fusiontrack-track"}
 
 
 def test_eval_names_the_cause_of_each_id_switch(tmp_path):

@@ -614,16 +614,16 @@ def track(
                           f"{pipeline})")
     if pipeline == "people-camera" and seed is not None:
         raise ConfigError("--seed: the people-camera pipeline draws no random numbers (it has no particle filter)")
-    started = time.time()
+    before = _snapshot(output)  # the earlier run's outputs, to remove those this run does not rewrite
     if pipeline == "wearable":
         _track_wearable(recordings, output, config=config, seed=seed)
-        _drop_stale_outputs(output, started)
+        _drop_stale_outputs(output, before)
         return
     if pipeline == "traffic":
         _track_traffic(recordings, output, config=config, geometry=geometry, rules=rules, compare=compare,
                        video=video, time_source=time_source, seed=seed, calibration=calibration, scene=scene,
                        workers=workers)
-        _drop_stale_outputs(output, started)
+        _drop_stale_outputs(output, before)
         return
     seed = 0 if seed is None else seed
     if pipeline == "people-camera":
@@ -633,7 +633,7 @@ def track(
         _track_camera(recordings, output, detections=detections, detection_scale=detection_scale,
                       min_score=min_score, camera_topic=camera_topic, max_frames=max_frames,
                       time_source=time_source, video=video)
-        _drop_stale_outputs(output, started)
+        _drop_stale_outputs(output, before)
         return
     camera_only = {"--detections": detections is not None, "--detection-scale": detection_scale != 1.0,
                    "--min-score": min_score is not None,
@@ -728,27 +728,57 @@ def track(
                                       time_source=time_source, clock_corrections_ns=cfg.clock_corrections_ns(),
                                       lasers=lasers, laser_poses=poses or None)
             console.print(f"overlay: {output / 'overlay.mp4'} ({ov.frames} frames)")
-    _drop_stale_outputs(output, started)
+    _drop_stale_outputs(output, before)
 
 
-TRACK_OUTPUTS = ("tracks.csv", "tracks.jsonl", "tracks.mp4", "overlay.mp4", "bias.csv", "tracks_mot.txt",
-                 "summary.json", "events.jsonl", "report.html", "trajectories.csv", "boxes.csv", "people.csv")
-"""The files some ``track`` pipeline writes into its output folder."""
+MANIFEST = ".fusiontrack-track"
+"""The file, in a ``track`` output folder, that lists what the run wrote there (one name per line)."""
 
 
-def _drop_stale_outputs(output: Path, started: float) -> None:
-    """After a run into a folder used before: the outputs of the earlier run that this one did not rewrite (a video
-    kept by --no-video, another pipeline's overlay or bias history) are removed, so that none is taken for this
-    run's; said in one line. Only after the run succeeded: a failed run loses nothing."""
-    stale = []
-    for name in TRACK_OUTPUTS:
-        f = output / name
+def _file_stats(output: Path) -> dict[str, tuple[int, int, int]]:
+    """name -> (inode, mtime, size) of the files in ``output`` (none if it does not exist)."""
+    out = {}
+    for f in output.iterdir() if output.is_dir() else []:
         try:
-            if f.is_file() and f.stat().st_mtime < started - 1.0:
-                f.unlink()
+            if f.is_file():
+                st = f.stat()
+                out[f.name] = (st.st_ino, st.st_mtime_ns, st.st_size)
+        except OSError:
+            continue
+    return out
+
+
+def _snapshot(output: Path) -> tuple[set[str], dict[str, tuple[int, int, int]]]:
+    """Before a run: the names the earlier run listed in its manifest, and every file's state."""
+    try:
+        listed = set((output / MANIFEST).read_text(encoding="utf-8").split("\n")) - {"", MANIFEST}
+    except OSError:
+        listed = set()
+    return {n for n in listed if "/" not in n}, _file_stats(output)
+
+
+def _drop_stale_outputs(output: Path, before: tuple[set[str], dict[str, tuple[int, int, int]]]) -> None:
+    """After a run into a folder used before: the earlier run's outputs (its manifest, :data:`MANIFEST`) that this
+    one did not rewrite (a video kept by --no-video, another pipeline's overlay or bias history) are removed, so
+    that none is taken for this run's; said in one line. Only files an earlier ``track`` listed as its own and this
+    run left as they were are removed (never a file fusiontrack did not write; no clock is compared), and only
+    after the run succeeded (a failed run loses nothing). The new manifest lists the files this run wrote."""
+    listed, stats = before
+    now = _file_stats(output)
+    written = sorted(n for n, st in now.items() if n != MANIFEST and stats.get(n) != st)
+    stale = []
+    for name in sorted(listed - set(written)):
+        if name in now and now[name] == stats.get(name):
+            try:
+                (output / name).unlink()
                 stale.append(name)
-        except OSError as err:
-            log.warning("%s: an output of an earlier run could not be removed (%s)", f, err.strerror or err)
+            except OSError as err:
+                log.warning("%s: an output of an earlier run could not be removed (%s)", output / name,
+                            err.strerror or err)
+    try:
+        (output / MANIFEST).write_text("".join(f"{n}\n" for n in written), encoding="utf-8")
+    except OSError as err:
+        log.warning("%s: cannot write the list of outputs (%s)", output / MANIFEST, err.strerror or err)
     if stale:
         console.print(f"removed from {output} what an earlier run wrote and this one did not: {', '.join(stale)}")
 
@@ -1514,7 +1544,6 @@ def demo(
         sim = run_simulation(scenario, output / "crowd", progress=lambda t: bar.update(task, completed=t))
     console.print(f"simulated {seconds:g} s of crowd: {sim.n_agents} people ({sim.mean_present:.1f} present on "
                   f"average), {sum(sim.messages.values())} sensor messages -> {output / 'crowd'}")
-    import time
 
     from .eval import evaluate_floor, metrics_table
     from .io.recording import Recording
