@@ -73,6 +73,19 @@ def test_an_exchange_needs_both_directions_within_the_window():
     assert [s.cause for s in id_switch_causes(m, st, exchange_s=5.0)] == ["exchange", "exchange"]
 
 
+def test_a_person_taken_and_given_back_is_no_exchange():
+    # track 2, alive far off from the start, takes person 1 for 3 frames; track 1 takes it back: one person, no
+    # exchange between two (review: both switches were labelled exchange)
+    xy = _people(1)
+    far = np.array([50.0, 50.0])
+    st = []
+    for k in range(N):
+        st.append(_state(k, 1, xy[k, 0] if not 40 <= k < 43 else far))
+        st.append(_state(k, 2, xy[k, 0] if 40 <= k < 43 else far + np.array([k, 0.0])))
+    switches = id_switch_causes(frame_matches(_truth(xy), st, 0.5), st)
+    assert [(s.from_track, s.to_track, s.cause) for s in switches] == [(1, 2, "takeover"), (2, 1, "takeover")]
+
+
 @pytest.mark.parametrize("seed", range(5))
 def test_the_causes_add_up_to_trackeval_id_switches(seed):
     """Random relabelings of a crowd's tracks (exchanges, new ids, ids reused, dropped frames): however the

@@ -91,13 +91,14 @@ def id_switch_causes(matches: FrameMatches, tracks: Iterable[TrackState | Track]
             if prev is not None and prev[0] != tid:
                 raw.append((t, g, prev[0], tid, prev[1]))
             last[g] = (tid, t)
-    by_pair: dict[tuple[int, int], list[int]] = {}
-    for t, _, a, b, _ in raw:
-        by_pair.setdefault((a, b), []).append(t)
+    by_pair: dict[tuple[int, int], list[tuple[int, int]]] = {}  # (from, to) -> [(time, person)]
+    for t, g, a, b, _ in raw:
+        by_pair.setdefault((a, b), []).append((t, g))
     ex_ns, new_ns, end_ns = round(exchange_s * 1e9), round(new_s * 1e9), round(ended_s * 1e9)
     out = []
     for t, g, a, b, t_last in raw:
-        if any(abs(t2 - t) <= ex_ns for t2 in by_pair.get((b, a), ())):
+        if any(g2 != g and abs(t2 - t) <= ex_ns for t2, g2 in by_pair.get((b, a), ())):  # (another person: one
+            # person taken by another track and given back is two takeovers)
             cause = "exchange"
         elif b in life and life[b][0] >= t - new_ns:
             cause = "reborn" if a in life and life[a][1] <= t + end_ns else "new_track"
