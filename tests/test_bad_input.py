@@ -75,6 +75,17 @@ def test_two_recordings_of_one_topic_over_the_same_time_are_warned_of(tmp_path, 
     with caplog.at_level("WARNING"), Recording([tmp_path / "a", tmp_path / "c"]):
         pass
     assert "both hold" not in caplog.text
+    # two machines recording together: different sensors, and both the same transforms (not sensor data): no word
+    from fusiontrack.types import Transform
+
+    tf = [Transform(50_000_000 + i * 100_000_000, "tf", "world", "base", np.zeros(3), np.array([0, 0, 0, 1.0]))
+          for i in range(1, 4)]
+    write_recording(tmp_path / "m1", [*scans(0, 1.0), *tf])
+    write_recording(tmp_path / "m2", [LaserScan(s.t_ns, "rear", "rear", -1.0, 0.01, 0.02, 5.0, np.ones(21))
+                                      for s in scans(50_000_000, 2.0)] + tf)
+    with caplog.at_level("WARNING"), Recording([tmp_path / "m1", tmp_path / "m2"]):
+        pass
+    assert "both hold" not in caplog.text
 
 
 @pytest.mark.parametrize("keep", [0.5, 0.01])

@@ -353,7 +353,8 @@ def test_eval_of_mot_files_reproduces_tud_campus(shared_data, tmp_path):
     floor.write_text("t,id,x,y\n1.0,1,0,0\n")
     for args, said in (([str(floor), str(tud / "gt.txt")], "is a MOTChallenge gt file (image boxes by frame)"),
                        ([str(tud / "test.txt"), str(tud / "gt.txt"), "--camera", "camera_0"],
-                        "--camera: scores against a simulated recording's")):
+                        "--camera: scores against a simulated recording's"),
+                       ([str(tud / "test.txt"), str(floor)], "is a CSV of floor positions")):
         r = subprocess.run([sys.executable, "-m", "fusiontrack", "eval", *args], capture_output=True, text=True,
                            timeout=60)
         assert r.returncode != 0

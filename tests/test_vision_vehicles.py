@@ -568,6 +568,14 @@ def test_another_tools_camera_is_found_beside_its_camera_info(tmp_path):
             w.write(Image(10**9, topic, topic, np.zeros((4, 4, 3), np.uint8), "bgr8"), topic=topic)
         info = "/hero/rgb/camera_info"
         w.write(CameraInfo(10**9, info, info, 640, 480, K), topic=info)
+    with RecordingWriter(tmp_path / "root") as w:  # usb_cam's defaults (/camera_info, /image_raw) beside /cam2/...
+        for topic in ("/image_raw", "/cam2/image_raw"):
+            w.write(Image(10**9, topic, topic, np.zeros((4, 4, 3), np.uint8), "bgr8"), topic=topic)
+        for info in ("/camera_info", "/cam2/camera_info"):
+            w.write(CameraInfo(10**9, info, info, 640, 480, K), topic=info)
+    with Recording(tmp_path / "root") as rec:
+        assert _image_topic(rec, "/camera_info") == "/image_raw"  # (not cam2's images)
+        assert _image_topic(rec, "/cam2/camera_info") == "/cam2/image_raw"
     with Recording(tmp_path / "rec") as rec:
         assert _image_topic(rec, "/hero/rgb/camera_info") == "/hero/rgb/image_raw"
         with pytest.raises(RecordingError, match="no image topic of camera '/nobody/camera_info'"):

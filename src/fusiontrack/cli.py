@@ -1066,7 +1066,17 @@ def eval_(
     less than half visible are distractors), with --camera or when the folder's tracks are of one camera.
     For a simulated recording, situation detection (seed 001 Table II) is scored too.
     """
-    from .eval import evaluate_floor, evaluate_mot_files, metrics_table, situation_accuracy, situation_table, truth_at
+    from .eval import (
+        evaluate_floor,
+        evaluate_mot_files,
+        frame_matches,
+        id_switch_causes,
+        metrics_table,
+        situation_accuracy,
+        situation_table,
+        switch_cause_counts,
+        truth_at,
+    )
 
     _check_time(time_source)
     if not (math.isfinite(threshold) and threshold > 0):  # (named by the option, not the library's threshold_m)
@@ -1088,6 +1098,9 @@ def eval_(
                               f"MOTChallenge result rows (a .txt, or the tracks_mot.txt of `track --pipeline "
                               f"people-camera`, or its folder); {tracks} is not one (floor tracks are scored against "
                               f"a recording with ground truth or a CSV of floor positions)")
+    if ground_truth.suffix.lower() == ".csv" and tracks.suffix == ".txt":
+        raise ConfigError(f"{tracks}: MOTChallenge rows (image boxes) are scored against a MOTChallenge gt file or a "
+                          f"simulated recording's camera boxes; {ground_truth} is a CSV of floor positions")
     if ground_truth.suffix.lower() == ".csv" and camera is not None:
         raise ConfigError(f"--camera: scores image boxes against a simulated recording's /ground_truth/CAMERA; "
                           f"{ground_truth} is a CSV of floor positions")
@@ -1131,16 +1144,16 @@ def eval_(
         metrics = evaluate_floor(scored, states, threshold_m=threshold)
         console.print(metrics_table({label: metrics}, title=f"tracking, match within {threshold:g} m"))
         result["metrics"] = metrics.to_dict()
-        if metrics.id_switches:  # what kind of identity errors: where to look, and what would cure them
-            from .eval import frame_matches, id_switch_causes, switch_cause_counts
-
-            switches = id_switch_causes(frame_matches(scored, states, threshold_m=threshold), states)
-            counts = switch_cause_counts(switches)
+        # what kind of identity errors: where to look, and what would cure them (the JSON has the keys always)
+        switches = id_switch_causes(frame_matches(scored, states, threshold_m=threshold), states) \
+            if metrics.id_switches else []
+        counts = switch_cause_counts(switches)
+        if switches:
             console.print("ID switches by cause: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in counts.items())
                           + " (fusiontrack.eval.switches)")
-            result["id_switch_causes"] = counts
-            result["id_switches"] = [{"t_ns": w.t_ns, "gt_id": w.gt_id, "from_track": w.from_track,
-                                      "to_track": w.to_track, "cause": w.cause} for w in switches]
+        result["id_switch_causes"] = counts
+        result["id_switches"] = [{"t_ns": w.t_ns, "gt_id": w.gt_id, "from_track": w.from_track,
+                                  "to_track": w.to_track, "cause": w.cause} for w in switches]
         if events and frames and "situation" in frames[0].attributes:
             from .sim.situations import situation_events
 

@@ -120,8 +120,8 @@ def camera_info_from_recording(path: str | Path, camera: str, info_topic: str = 
         info = next((m for m in rec.messages(wanted) if isinstance(m, CameraInfo)), None) if wanted else None
     where = f" on {info_topic}" if info_topic else ""
     if info is None:
-        raise RecordingError(f"{path}: no CameraInfo of camera {camera!r}{where} (name its topic with info_topic in "
-                             f"the camera's [sensors] table)")
+        hint = "" if info_topic else " (name its topic with info_topic in the camera's [sensors] table)"
+        raise RecordingError(f"{path}: no CameraInfo of camera {camera!r}{where}{hint}")
     K = np.asarray(info.K, dtype=np.float64)
     if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
         fx, fy = (K[0, 0], K[1, 1]) if K.shape == (3, 3) else (np.nan, np.nan)

@@ -156,10 +156,13 @@ def _check_not_copies(paths: Sequence[Path], readers: Sequence[AnyReader]) -> No
 def _warn_shared_topics(paths: Sequence[Path], readers: Sequence[AnyReader]) -> None:
     """A warning for two inputs that hold the same sensor topic over overlapping times: read as one, their messages
     interleave (two scenes merged: the tracks of both worlds in one). Consecutive pieces of a recording do not
-    overlap; the bags of two machines recorded together hold different sensors (``/tf`` aside)."""
+    overlap; the bags of two machines recorded together hold different sensors (TF, ``/rosout`` and other
+    non-sensor topics aside)."""
     spans = []
     for path, reader in zip(paths, readers, strict=True):
-        topics = {c.topic for c in reader.connections if c.msgcount and c.topic not in ("/tf", "/tf_static")}
+        # sensor data only: not /rosout, /parameter_events, TF (which every machine's bag may hold)
+        topics = {c.topic for c in reader.connections if c.msgcount and c.msgtype in FROM_ROS
+                  and not c.msgtype.startswith("tf2_msgs/")}
         if topics:
             spans.append((path, reader.start_time, reader.end_time, topics))
     for (pa, a0, a1, ta), (pb, b0, b1, tb) in itertools.combinations(spans, 2):

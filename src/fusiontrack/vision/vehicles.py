@@ -1507,9 +1507,13 @@ def _image_topic(rec: Any, camera: str) -> str:
     found = [t for t in images if rec.sensor_of(t) == camera]
     if not found and camera.startswith("/"):
         # another tool's recording: a camera is known by its CameraInfo topic (/ns/camera_info); its images are
-        # beside it as ROS names them (/ns/image_raw, /ns/image_raw/compressed), not depth images
+        # beside it as ROS names them (/ns/image_raw, /ns/image_raw/compressed), not depth images, and not those
+        # of a camera deeper down with a CameraInfo of its own (/ns/cam2/image_raw beside /ns/cam2/camera_info)
         ns = camera.rsplit("/", 1)[0] if camera.endswith("camera_info") else camera
-        found = [t for t in images if t.startswith(ns + "/") and "depth" not in t[len(ns):]]
+        others = [t.rsplit("/", 1)[0] for t, i in topics.items() if i == "sensor_msgs/msg/CameraInfo"
+                  and t != camera and len(t.rsplit("/", 1)[0]) > len(ns)]
+        found = [t for t in images if t.startswith(ns + "/") and "depth" not in t[len(ns):]
+                 and not any(t.startswith(o + "/") for o in others if o.startswith(ns + "/"))]
     if not found:
         raise RecordingError(f"{rec.paths[0]}: no image topic of camera {camera!r}")
     return sorted(found, key=lambda s: (not s.endswith("/image"), s))[0]
