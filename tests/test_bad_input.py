@@ -251,6 +251,8 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         (["simulate", "crowd", "-o", "{out}", "--seconds", "1", "--seed", "-1"],
          "--seed: expected an integer >= 0, got -1"),
         (["track", "{demo}", "-o", "{out}", "--tracker", "bogus"], "--tracker: expected 'pf' or 'kalman'"),
+        (["simulate", "crossing", "-o", "{out}", "--seconds", "1", "--set", "scenario.duration_s=2"],
+         "scenario.duration_s is set twice, by seconds (--seconds) and by a setting (--set)"),
         (["eval", "{demo}", "{demo}", "--threshold", "0"], "--threshold: expected a distance > 0"),
         (["track", "{demo}", "-o", "{out}", "-c", "{offset_inf}"],
          "offset_inf.toml: sensors.l0.clock_offset_ms: Input should be a finite number"),

@@ -198,6 +198,11 @@ class Scenario:
                        settings: Mapping[str, Any] | None = None) -> Scenario:
         """A copy with the duration, seed or any dotted key (``agents.mean_present``) replaced."""
         data = self.config.model_dump()
+        given = {"scenario.duration_s": ("seconds", seconds), "scenario.seed": ("seed", seed)}
+        for key, (option, value) in given.items():
+            if value is not None and key in (settings or {}):  # (the setting won without a word)
+                raise ConfigError(f"{self.source}: {key} is set twice, by {option} (--{option}) and by a setting "
+                                  f"(--set): give it once")
         if seconds is not None:
             data["scenario"]["duration_s"] = seconds
         if seed is not None:

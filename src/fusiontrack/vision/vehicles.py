@@ -491,7 +491,8 @@ def camera_homography(rec: Any, camera: str, *, world_frame: str = "world"
     cam = camera_from_recording(rec, camera, camera, world_frame=world_frame)
     if cam is None:
         raise RecordingError(f"{rec.paths[0]}: camera {camera!r} has no CameraInfo or no pose in tf relative to "
-                             f"{world_frame!r}: no ground homography")
+                             f"{world_frame!r}: no ground homography (a road calibration poses it: `fusiontrack "
+                             f"calibrate-road`, then track --calibration FILE)")
     return camera_ground_homography(cam), np.array(cam.K), np.array(cam.dist), (cam.width, cam.height)
 
 
