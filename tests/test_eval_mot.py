@@ -80,6 +80,22 @@ def tud(shared_data: Path) -> dict[str, Metrics]:
     return res
 
 
+def test_results_in_frames_the_truth_lacks_are_warned_of(shared_data: Path, tmp_path: Path, caplog) -> None:
+    # TUD-Campus's own result with its frames shifted by 1000: scored (every box missed / false), but said
+    root = shared_data / "mot_reference" / "motmetrics_tud" / "TUD-Campus"
+    shifted = tmp_path / "shifted.txt"
+    rows = [r.split(",") for r in (root / "test.txt").read_text().split()]
+    shifted.write_text("".join(",".join([str(int(float(r[0])) + 1000), *r[1:]]) + "\n" for r in rows))
+    with caplog.at_level("WARNING"):
+        m = evaluate_mot_files(root / "gt.txt", shifted)
+    assert "shifted.txt: 0 % of its boxes are in frames of" in caplog.text
+    assert m.tp == 0
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        evaluate_mot_files(root / "gt.txt", root / "test.txt")
+    assert "of its boxes are in frames" not in caplog.text
+
+
 def _pct(x: float) -> float:
     """A fraction as the devkit prints it: percent with one decimal."""
     return round(100 * x, 1)

@@ -203,6 +203,16 @@ def test_mot_frames_numbered_from_0_are_refused(tmp_path: Path) -> None:
         read_mot(path)
 
 
+@pytest.mark.parametrize("row", ["2,1,10,20,-30,40", "2,1,10,20,30,-1", "2,1,nan,20,30,40", "2,1,10,inf,30,40"])
+def test_mot_boxes_of_negative_size_or_not_finite_are_refused(tmp_path: Path, row: str) -> None:
+    # a negative width was scored as a box of its own (it sits left of bb_left)
+    path = tmp_path / "res.txt"
+    path.write_text(f"1,1,10,20,30,40\n{row}\n")
+    with pytest.raises(RecordingError, match=r"res\.txt, line 2: box .*expected a finite bb_left, bb_top and a "
+                                             r"width and height >= 0"):
+        read_mot(path)
+
+
 @pytest.mark.skipif(not TUD.is_dir(), reason="MOT reference data not available")
 @pytest.mark.parametrize(("seq", "rows", "n_ids", "first_xyxy"), [
     ("TUD-Campus", 359, 8, [399, 182, 520, 411]),  # first line 1,1,399,182,121,229,1,-1,-1,-1

@@ -934,6 +934,12 @@ def evaluate_mot_files(gt_path: str | Path, res_path: str | Path, *, preprocess:
     """
     gt_path, res_path = Path(gt_path), Path(res_path)
     gt, res = read_mot(gt_path), read_mot(res_path)
+    if len(gt) and len(res):
+        inside = np.isin(res.frame, np.unique(gt.frame)).mean()
+        if inside < 0.5:  # (scored all the same: every truth box missed, every result box a false positive)
+            logger.warning("%s: %.0f %% of its boxes are in frames of %s (its frames %d..%d, the truth's %d..%d): "
+                        "another sequence, or frames numbered otherwise?", res_path, 100 * inside, gt_path,
+                        res.frame.min(), res.frame.max(), gt.frame.min(), gt.frame.max())
     if n_frames is None:
         n_frames = _seq_length(gt_path)
     return evaluate_boxes(gt, res, preprocess=preprocess, iou_threshold=iou_threshold, n_frames=n_frames,

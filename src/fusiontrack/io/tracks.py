@@ -429,6 +429,11 @@ def read_mot(path: str | Path) -> MotBoxes:
         i = int(low[0])
         raise RecordingError(f"{path}, line {int(table.line_numbers[i])}: frame {int(v[i, 0])}: MOTChallenge frames "
                              f"are numbered from 1 (a file numbered from 0: add 1 to every frame)")
+    bad = np.flatnonzero(~np.isfinite(v[:, 2:6]).all(axis=1) | (v[:, 4] < 0) | (v[:, 5] < 0))
+    if bad.size:  # (a negative size was scored as a box of its own)
+        i = int(bad[0])
+        raise RecordingError(f"{path}, line {int(table.line_numbers[i])}: box {v[i, 2:6].tolist()}: expected a finite "
+                             f"bb_left, bb_top and a width and height >= 0")
     n = v.shape[0]
     conf = v[:, 6].copy() if v.shape[1] > 6 else np.ones(n)
     boxes = MotBoxes(frame=v[:, 0].astype(np.int64), id=v[:, 1].astype(np.int64), boxes_ltwh=v[:, 2:6].copy(),
