@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
@@ -73,3 +74,89 @@ def test_the_fused_pipeline_finds_its_camera_without_sensor_metadata(foreign_cro
     assert stats.bias is not None
     assert abs(math.degrees(stats.bias.bias_rad) - YAW_ERROR_DEG) < 0.3  # the simulator's truth
     assert states
+
+
+def _images(path: Path, topics: dict[str, str]) -> Path:
+    """A recording of one image per topic (``kind``: "raw", "png" compressed, or "info") with no sensor metadata."""
+    pixels = np.zeros((4, 6, 3), np.uint8)
+    K = np.array([[5.0, 0, 3], [0, 5.0, 2], [0, 0, 1]])
+    with RecordingWriter(path) as w:
+        for topic, kind in topics.items():
+            record = CameraInfo(0, topic, "cam", 4, 6, K) if kind == "info" else Image(0, topic, "cam", pixels, "bgr8")
+            w.write(record, topic=topic, image_format="png" if kind == "png" else None)
+    return path
+
+
+def test_one_camera_published_raw_and_compressed_is_one_camera(tmp_path: Path) -> None:
+    """image_transport publishes ``/ns/image_raw/compressed`` beside ``/ns/image_raw``: one camera, read raw. The
+    people pipelines refused such a recording ("several image topics") unless told --camera-topic."""
+    path = _images(tmp_path / "r", {"/cam/image_raw": "raw", "/cam/image_raw/compressed": "png",
+                                    "/cam/camera_info": "info", "/cam/depth/image_raw": "raw",
+                                    "/cam/depth_registered/image": "raw"})
+    with Recording(path) as rec:
+        assert rec.image_topics() == ["/cam/image_raw"]  # (not its compressed variant, not the depth images)
+        assert rec.image_topic() == "/cam/image_raw"
+        assert rec.image_topic(camera="/cam/camera_info") == "/cam/image_raw"
+        assert rec.image_topic(camera="/cam/image_raw/compressed") == "/cam/image_raw/compressed"
+    only = _images(tmp_path / "c", {"/cam/image_raw/compressed": "png", "/cam/camera_info": "info"})
+    with Recording(only) as rec:
+        assert rec.image_topic() == "/cam/image_raw/compressed"
+
+
+def test_image_topic_errors_name_the_option_and_the_choices(tmp_path: Path) -> None:
+    from fusiontrack.errors import ConfigError, TopicError
+
+    path = _images(tmp_path / "r", {"/left/image_raw": "raw", "/left/image_raw/compressed": "png",
+                                    "/right/image_raw": "raw", "/right/camera_info": "info"})
+    with Recording(path) as rec:
+        with pytest.raises(ConfigError, match=r"several cameras' image topics \(/left/image_raw, /right/image_raw\); "
+                                              r"choose one with camera_topic \(--camera-topic\)"):
+            rec.image_topic()
+        assert rec.image_topic(required=False, camera="/right/camera_info") == "/right/image_raw"
+        with pytest.raises(TopicError, match=r"camera_topic \(--camera-topic\) '/right/camera_info': a "
+                                             r"sensor_msgs/msg/CameraInfo topic, not an image; image topics: "
+                                             r"/left/image_raw, /right/image_raw"):
+            rec.image_topic(topic="/right/camera_info")
+        with pytest.raises(TopicError, match="image_topic '/middle/image_raw': no such topic"):
+            rec.image_topic(topic="/middle/image_raw", option="image_topic")
+        with pytest.raises(TopicError, match="no image topic of camera '/middle/camera_info'"):
+            rec.image_topic(camera="/middle/camera_info")
+    empty = _images(tmp_path / "e", {"/cam/camera_info": "info"})
+    with Recording(empty) as rec:
+        assert rec.image_topic(required=False) is None
+        with pytest.raises(TopicError, match="no image topic"):
+            rec.image_topic()
+
+
+def test_the_people_pipelines_read_the_raw_images_beside_their_compressed_copy(foreign_crowd: dict,
+                                                                              tmp_path: Path) -> None:
+    """The 9 s foreign ``crowd`` with its images also on ``/camera_0/image/compressed``: the fused and the camera
+    pipelines both track through the raw topic, as without the copy."""
+    from fusiontrack.vision.people import track_camera
+
+    both = tmp_path / "both"
+    with AnyReader([foreign_crowd["path"]]) as reader:
+        writer = Writer(both, version=9, storage_plugin=StoragePlugin.MCAP)
+        writer.open()
+        conns = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=reader.typestore)
+                 for c in reader.connections}
+        image = next(c for c in reader.connections if c.topic == "/camera_0/image")
+        copy = writer.add_connection("/camera_0/image/compressed", "sensor_msgs/msg/CompressedImage",
+                                     typestore=reader.typestore)
+        for c, t, raw in reader.messages():
+            writer.write(conns[c.id], t, raw)
+            if c.id == image.id:
+                msg = reader.deserialize(raw, c.msgtype)
+                ok, png = cv2.imencode(".png", np.asarray(msg.data, np.uint8).reshape(msg.height, msg.width, -1))
+                assert ok
+                comp = reader.typestore.types["sensor_msgs/msg/CompressedImage"](
+                    header=msg.header, format="bgr8; png compressed bgr8", data=png.ravel())
+                writer.write(copy, t, reader.typestore.serialize_cdr(comp, "sensor_msgs/msg/CompressedImage"))
+        writer.close()
+    _, _, stats = track_fused(both, clock_corrections_ns=foreign_crowd["corrections"],
+                              tracker_params={"lateral_m": 0.2}, rng=0, adaptive_bias=False)
+    assert stats.camera == "/camera_0/image"
+    assert stats.frames_used > 0
+    _, _, cam_stats = track_camera(both, max_frames=10)
+    assert cam_stats.sensor == "/camera_0/image"  # (a foreign recording's sensors are its topics)
+    assert cam_stats.n_frames == 10

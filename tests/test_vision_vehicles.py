@@ -560,7 +560,6 @@ def test_another_tools_camera_is_found_beside_its_camera_info(tmp_path):
     ROS names them (not its depth images). It failed with 'no image topic of camera /ns/rgb/camera_info'."""
     from fusiontrack.io.writer import RecordingWriter
     from fusiontrack.types import CameraInfo
-    from fusiontrack.vision.vehicles import _image_topic
 
     K = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
     with RecordingWriter(tmp_path / "rec") as w:
@@ -574,9 +573,9 @@ def test_another_tools_camera_is_found_beside_its_camera_info(tmp_path):
         for info in ("/camera_info", "/cam2/camera_info"):
             w.write(CameraInfo(10**9, info, info, 640, 480, K), topic=info)
     with Recording(tmp_path / "root") as rec:
-        assert _image_topic(rec, "/camera_info") == "/image_raw"  # (not cam2's images)
-        assert _image_topic(rec, "/cam2/camera_info") == "/cam2/image_raw"
+        assert rec.image_topic(camera="/camera_info") == "/image_raw"  # (not cam2's images)
+        assert rec.image_topic(camera="/cam2/camera_info") == "/cam2/image_raw"
     with Recording(tmp_path / "rec") as rec:
-        assert _image_topic(rec, "/hero/rgb/camera_info") == "/hero/rgb/image_raw"
+        assert rec.image_topic(camera="/hero/rgb/camera_info") == "/hero/rgb/image_raw"
         with pytest.raises(RecordingError, match="no image topic of camera '/nobody/camera_info'"):
-            _image_topic(rec, "/nobody/camera_info")
+            rec.image_topic(camera="/nobody/camera_info")

@@ -296,7 +296,7 @@ def test_frames_without_scans_are_just_the_image_and_max_frames_stops(crowd, tmp
 
 
 def test_a_recording_without_that_camera_names_the_camera_and_the_topics(crowd, tmp_path):
-    with pytest.raises(RecordingError, match=r"camera 'camera_9'.*camera_0.*/laser_0/scan"):
+    with pytest.raises(RecordingError, match=r"camera 'camera_9'.*image topics: /camera_0/image \(camera camera_0\)"):
         render_fused_overlay(crowd["path"], tmp_path / "x.mp4", camera="camera_9")
     with pytest.raises(RecordingError, match="image_topic '/camera_0/camera_info'"):
         render_fused_overlay(crowd["path"], tmp_path / "x.mp4", image_topic="/camera_0/camera_info")

@@ -56,8 +56,6 @@ log = logging.getLogger(__name__)
 
 BoxSource = Literal["blobs", "truth"]
 Background = Literal["prime", "learn"]
-IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
-"""Camera image topics the bias reads (the reader decodes compressed images into :class:`~fusiontrack.types.Image`)."""
 PIXEL_EDGE_OFFSET_PX = 0.5
 """Blob boxes (ALGORITHMS.md A4) are on pixel edges, pixel ``k`` covering ``[k, k + 1)``; in the camera model's
 (OpenCV's) coordinates pixel ``k`` is centred on ``k``, so a blob box is moved by -0.5 px before use."""
@@ -132,34 +130,11 @@ def _camera_info(rec: Recording, camera: str) -> CameraInfo | None:
     return next((m for m in rec.messages(infos[:1]) if isinstance(m, CameraInfo)), None) if infos else None
 
 
-def _colour_topic(topic: str) -> bool:
-    """Not a label or depth image topic (the simulator's ``/<camera>/labels``, ``/<camera>/depth``)."""
-    return not topic.endswith(("/labels", "/depth")) and "depth" not in topic.split("/")[-1]
-
-
-def _image_topic(rec: Recording, camera: str, image_topic: str | None) -> str:
-    """``image_topic`` (checked), else the camera's first colour image topic (raw preferred to compressed)."""
-    topics = rec.topic_types()
-    if image_topic is not None:
-        msgtype = topics.get(image_topic)
-        if msgtype not in IMAGE_TYPES:
-            raise RecordingError(f"{rec.paths[0]}: image_topic {image_topic!r} is not a sensor_msgs/Image or "
-                                 f"CompressedImage topic of the recording"
-                                 f"{'' if msgtype is None else f' (it is {msgtype})'}")
-        return image_topic
-    images = sorted((t for t, m in topics.items() if m in IMAGE_TYPES and rec.sensor_of(t) == camera
-                     and _colour_topic(t)), key=lambda t: IMAGE_TYPES.index(topics[t]))
-    if not images:
-        raise RecordingError(f"{rec.paths[0]}: no sensor_msgs/Image or CompressedImage topic of camera {camera!r}; "
-                             f"image topics: {[t for t, m in topics.items() if m in IMAGE_TYPES]}")
-    return images[0]
-
-
 def _setup(rec: Recording, camera: str, lasers: Sequence[str] | None, world_frame: str, cam2world: Any,
            laser2world: Mapping[str, Any] | None, image_topic: str | None = None,
            ) -> tuple[PinholeCamera, str, dict[str, np.ndarray], dict[str, str]]:
     topics = rec.topic_types()
-    image_topic = _image_topic(rec, camera, image_topic)
+    image_topic = rec.image_topic(camera=camera, topic=image_topic, option="image_topic")
     if cam2world is None:
         cam = camera_from_recording(rec, camera, camera, world_frame=world_frame)
     else:

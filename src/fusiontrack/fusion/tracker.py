@@ -1356,21 +1356,6 @@ def _shown(path: str | Path | Sequence[str | Path]) -> str:
     return str(path) if isinstance(path, str | Path) else ", ".join(str(p) for p in path)
 
 
-def _image_topic(rec: Any, camera_topic: str | None) -> str | None:
-    """The image topic to fuse: ``camera_topic``, else the recording's only camera image topic, else None."""
-    topics = rec.topic_types()
-    if camera_topic is not None:
-        if camera_topic not in topics:
-            raise RecordingError(f"{rec.paths[0]}: no topic {camera_topic!r}")
-        return camera_topic
-    found = [t for t, i in topics.items() if i in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
-             and not t.endswith(("/labels", "/depth")) and "depth" not in t.split("/")[-1]]
-    if len(found) > 1:
-        raise ConfigError(f"{rec.paths[0]}: several image topics ({', '.join(found)}); choose one with camera_topic "
-                          "(--camera-topic)")
-    return found[0] if found else None
-
-
 def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCamera | None = None,
                       lasers: Mapping[str, Any] | None = None, learning: BiasLearning | None = None,
                       clock_corrections_ns: Mapping[str, int] | None = None, world_frame: str = "world",
@@ -1574,7 +1559,7 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
             raise RecordingError(f"{', '.join(str(q) for q in rec.paths)}: no sensor_msgs/LaserScan topic to track "
                                  "(the people pipeline fuses lasers with a camera; --pipeline people-camera tracks "
                                  "with the camera alone)")
-        image_topic = _image_topic(rec, camera_topic)
+        image_topic = rec.image_topic(topic=camera_topic, required=False)
         cam_sensor = "" if image_topic is None else rec.sensor_of(image_topic)
         if image_topic is None:
             log.warning("%s: no camera image topic: the people pipeline tracks with the lasers only", _shown(path))

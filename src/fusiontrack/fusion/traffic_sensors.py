@@ -17,7 +17,6 @@ from ..errors import ConfigError, RecordingError
 from ..laser.vehicles import LaserVehicleDetector, laser_poses_for_recording
 from ..vision.vehicles import CameraVehicleDetector, VehicleDetectorParams, vehicle_detectors_for_recording
 from ..vision.vehicles import _camera_names as camera_names
-from ..vision.vehicles import _image_topic as image_topic
 
 log = logging.getLogger(__name__)
 
@@ -102,7 +101,7 @@ def traffic_branches(rec: Any, roads: Any, *, laser_params: Mapping[str, Any] | 
     for name in cameras:
         if name in calib.cameras:
             c = calib.camera(name)
-            cams[name] = (image_topic(rec, name), CameraVehicleDetector(name, c.image2road, roads, camera_params,
+            cams[name] = (rec.image_topic(camera=name), CameraVehicleDetector(name, c.image2road, roads, camera_params,
                                                                         K=c.K, dist=c.dist))
     if calibration is not None:
         log.info("sensors posed by %s: %s; by the recording: %s", calib.source,

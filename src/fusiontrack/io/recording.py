@@ -28,7 +28,7 @@ import numpy as np
 from rosbags.highlevel import AnyReader
 from rosbags.interfaces import Connection
 
-from ..errors import MessageTypeError, RecordingError, TopicError
+from ..errors import ConfigError, MessageTypeError, RecordingError, TopicError
 from ..types import Message
 from .recover import recording_kind
 from .ros import (
@@ -76,6 +76,12 @@ class TopicInfo:
         """Mean message rate; 0 for fewer than two messages."""
         span = self.t_end_ns - self.t_start_ns
         return (self.count - 1) / (span / 1e9) if self.count > 1 and span > 0 else 0.0
+
+
+def _colour_image(topic: str) -> bool:
+    """An image topic's name is not that of a label or depth image (the simulator's ``/<camera>/labels`` and
+    ``/<camera>/depth``, ROS drivers' ``/ns/depth/image_raw``, ``/ns/depth_registered/image``)."""
+    return not topic.endswith("/labels") and not any("depth" in part for part in topic.split("/"))
 
 
 _TUPLE_OF_TEXTS = re.compile(r"""\((?:'[^'\\]*'|"[^"\\]*")(?:,\s*(?:'[^'\\]*'|"[^"\\]*"))*,?\)""")
@@ -275,6 +281,68 @@ class Recording:
 
     def sensor_of(self, topic: str) -> str:
         return self._sensor_map.get(topic, topic)
+
+    def image_topics(self, camera: str | None = None) -> list[str]:
+        """The colour image topics (``sensor_msgs/Image`` or ``CompressedImage``; not label or depth images) of a
+        camera, or of every camera; one per camera, the preferred first.
+
+        ``camera``: a sensor name (fusiontrack's sensor metadata), else, in a recording made by other tools (no
+        metadata: each topic is its own sensor), a ``camera_info`` topic or a namespace, whose images are beside
+        it as ROS names them (``/ns/image_raw`` for ``/ns/camera_info``; not those of a camera deeper down with a
+        ``camera_info`` of its own), or one of its image topics. The variants image_transport publishes of one
+        image stream (``/ns/image_raw/compressed`` beside ``/ns/image_raw``) are one camera: the raw stream is
+        listed, its variants are not.
+        """
+        types = self.topic_types()
+        colour = [t for t, m in types.items() if m in (IMAGE, COMPRESSED_IMAGE) and _colour_image(t)]
+        if camera is not None:
+            own = [t for t in colour if self.sensor_of(t) == camera]
+            if not own and camera in colour:
+                own = [camera]
+            elif not own and camera.startswith("/"):
+                ns = camera.rsplit("/", 1)[0] if camera.endswith("camera_info") else camera.rstrip("/")
+                deeper = [t.rsplit("/", 1)[0] for t, m in types.items() if m == CAMERA_INFO and t != camera
+                          and t.startswith(ns + "/") and len(t.rsplit("/", 1)[0]) > len(ns)]
+                own = [t for t in colour if t.startswith(ns + "/")
+                       and not any(t.startswith(d + "/") for d in deeper)]
+            colour = own
+        streams = [t for t in colour if not any(t.startswith(u + "/") for u in colour if u != t)]
+        # raw before compressed, a simulated camera's ``/image`` before other names
+        return sorted(streams, key=lambda t: (types[t] != IMAGE, not t.endswith("/image"), t))
+
+    def image_topic(self, camera: str | None = None, topic: str | None = None, *, required: bool = True,
+                    option: str = "camera_topic (--camera-topic)") -> str | None:
+        """The image topic to read: ``topic`` (checked), else that of ``camera`` (:meth:`image_topics`: the first
+        of its streams), else the recording's only camera's.
+
+        Raises
+        ------
+        TopicError
+            ``topic`` is not an image topic of the recording; or no image topic (``required``; else None).
+        ConfigError
+            ``camera`` and ``topic`` are None and the recording has several cameras.
+
+        ``option`` names ``topic`` as the caller's user gives it, in the messages.
+        """
+        types = self.topic_types()
+        where = ", ".join(str(q) for q in self.paths)
+        if topic is not None:
+            if types.get(topic) not in (IMAGE, COMPRESSED_IMAGE):
+                found = ", ".join(self.image_topics()) or "none"
+                what = "no such topic" if topic not in types else f"a {types[topic]} topic, not an image"
+                raise TopicError(f"{where}: {option} {topic!r}: {what}; image topics: {found}")
+            return topic
+        found = self.image_topics(camera)
+        if not found:
+            if not required:
+                return None
+            whose = "" if camera is None else f" of camera {camera!r}"
+            shown = [t if self.sensor_of(t) == t else f"{t} (camera {self.sensor_of(t)})" for t in self.image_topics()]
+            others = "" if camera is None else f"; image topics: {', '.join(shown) or 'none'}"
+            raise TopicError(f"{where}: no image topic{whose} (sensor_msgs/Image or CompressedImage){others}")
+        if camera is None and len(found) > 1:
+            raise ConfigError(f"{where}: several cameras' image topics ({', '.join(found)}); choose one with {option}")
+        return found[0]
 
     def camera_info_topics(self, camera: str) -> list[str]:
         """The ``CameraInfo`` topics of a camera (its sensor name, or one of its image topics).

@@ -2163,8 +2163,7 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
         info = rec.topics()
         lasers = [t for t, i in info.items() if i.msgtype == LASERSCAN] if topics is None else list(topics)
         if not lasers:
-            images = [t for t, i in info.items() if i.msgtype in ("sensor_msgs/msg/Image",
-                                                                  "sensor_msgs/msg/CompressedImage")]
+            images = rec.image_topics()
             hint = (f" (it has images on {', '.join(images)}: --pipeline people-camera tracks people in them)"
                     if images else "")
             raise ConfigError(f"{', '.join(str(q) for q in rec.paths)}: no sensor_msgs/LaserScan topic to "

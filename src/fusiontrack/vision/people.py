@@ -792,28 +792,6 @@ class CameraRunStats:
 VIDEO_SUFFIXES = frozenset({".avi", ".mp4", ".mkv", ".mov", ".m4v", ".webm", ".mpg", ".mpeg"})
 
 
-def _image_topic(rec: Any, camera_topic: str | None) -> str:
-    topics = rec.topic_types()
-    if camera_topic is not None:
-        if camera_topic not in topics:
-            raise RecordingError(f"{rec.paths[0]}: no topic {camera_topic!r}; image topics: "
-                                 f"{', '.join(_image_topics(topics)) or 'none'}")
-        return camera_topic
-    found = _image_topics(topics)
-    if not found:
-        raise RecordingError(f"{rec.paths[0]}: no image topic (sensor_msgs/Image or CompressedImage) to track "
-                             "people in")
-    if len(found) > 1:
-        raise ConfigError(f"{rec.paths[0]}: several image topics ({', '.join(found)}); choose one with camera_topic "
-                          "(--camera-topic)")
-    return found[0]
-
-
-def _image_topics(topics: dict[str, Any]) -> list[str]:
-    return [t for t, i in topics.items() if i in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
-            and not t.endswith(("/labels", "/depth")) and "depth" not in t.split("/")[-1]]
-
-
 class _Frames:
     """Time-stamped colour images of a video file or a recording's image topic, with the camera if known."""
 
@@ -840,7 +818,7 @@ class _Frames:
         self._video = None
         self._rec = Recording(paths)
         try:
-            self.topic = _image_topic(self._rec, camera_topic)
+            self.topic = self._rec.image_topic(topic=camera_topic)
             info = self._rec.topics()[self.topic]
             self.sensor = self._rec.sensor_of(self.topic)
             self.count = info.count

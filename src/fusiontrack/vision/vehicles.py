@@ -1501,25 +1501,6 @@ class CameraVehicleDetector:
 # --------------------------------------------------------------------------------------------------
 
 
-def _image_topic(rec: Any, camera: str) -> str:
-    topics = rec.topic_types()
-    images = [t for t, i in topics.items() if i in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
-              and not t.endswith(("/labels", "/depth"))]
-    found = [t for t in images if rec.sensor_of(t) == camera]
-    if not found and camera.startswith("/"):
-        # another tool's recording: a camera is known by its CameraInfo topic (/ns/camera_info); its images are
-        # beside it as ROS names them (/ns/image_raw, /ns/image_raw/compressed), not depth images, and not those
-        # of a camera deeper down with a CameraInfo of its own (/ns/cam2/image_raw beside /ns/cam2/camera_info)
-        ns = camera.rsplit("/", 1)[0] if camera.endswith("camera_info") else camera
-        others = [t.rsplit("/", 1)[0] for t, i in topics.items() if i == "sensor_msgs/msg/CameraInfo"
-                  and t != camera and len(t.rsplit("/", 1)[0]) > len(ns)]
-        found = [t for t in images if t.startswith(ns + "/") and "depth" not in t[len(ns):]
-                 and not any(t.startswith(o + "/") for o in others if o.startswith(ns + "/"))]
-    if not found:
-        raise RecordingError(f"{rec.paths[0]}: no image topic of camera {camera!r}")
-    return sorted(found, key=lambda s: (not s.endswith("/image"), s))[0]
-
-
 def _camera_names(rec: Any) -> list[str]:
     topics = rec.topic_types()
     return sorted({rec.sensor_of(t) for t, i in topics.items() if i == "sensor_msgs/msg/CameraInfo"})
@@ -1555,7 +1536,7 @@ def vehicle_detectors_for_recording(rec: Any, roads: Any, cameras: Sequence[str]
         raise RecordingError(f"{rec.paths[0]}: no camera with a CameraInfo topic")
     out = {}
     for name in names:
-        topic = _image_topic(rec, name)
+        topic = rec.image_topic(camera=name)
         H, K, dist, _ = camera_homography(rec, name, world_frame=world_frame)
         out[name] = (topic, CameraVehicleDetector(name, H, roads, params, K=K, dist=dist))
     return out

@@ -64,7 +64,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 PERSON_RADIUS_M = 0.25
 """Radius of the person cylinder drawn for a track without an image box (0.5 m wide)."""
 PERSON_HEIGHT_M = 1.75
@@ -373,10 +372,6 @@ class _EventCursor:
         return out
 
 
-def _colour_topic(topic: str) -> bool:
-    return not topic.endswith(("/labels", "/depth")) and "depth" not in topic.split("/")[-1]
-
-
 def _setup(rec: Recording, camera: str, image_topic: str | None, world_frame: str, lasers: Sequence[str] | None,
            camera_model: PinholeCamera | None, laser_poses: Mapping[str, Any] | None,
            ) -> tuple[str, PinholeCamera, dict[str, str], dict[str, np.ndarray]]:
@@ -385,16 +380,7 @@ def _setup(rec: Recording, camera: str, image_topic: str | None, world_frame: st
 
     topics = rec.topics()
     where = ", ".join(str(p) for p in rec.paths)
-    if image_topic is not None and (image_topic not in topics or topics[image_topic].msgtype not in IMAGE_TYPES):
-        raise RecordingError(f"{where}: image_topic {image_topic!r} is not an Image or CompressedImage topic of the "
-                             f"recording (image topics: {[t for t, i in topics.items() if i.msgtype in IMAGE_TYPES]})")
-    own = [t for t, i in topics.items() if i.msgtype in IMAGE_TYPES and rec.sensor_of(t) == camera and _colour_topic(t)]
-    images = [image_topic] if image_topic is not None else \
-        sorted(own, key=lambda t: IMAGE_TYPES.index(topics[t].msgtype))
-    if not images:
-        cameras = sorted({rec.sensor_of(t) for t, i in topics.items() if i.msgtype in IMAGE_TYPES})
-        raise RecordingError(f"{where}: no image topic of camera {camera!r} (cameras: {cameras or 'none'}; "
-                             f"topics: {sorted(topics)})")
+    image = rec.image_topic(camera=camera, topic=image_topic, option="image_topic")
     if camera_model is None:
         camera_model = camera_from_recording(rec, camera, camera, world_frame=world_frame)
         if camera_model is None:
@@ -425,7 +411,7 @@ def _setup(rec: Recording, camera: str, image_topic: str | None, world_frame: st
             log.warning("%s: no transform from laser %r to %r: its points are not drawn", where, name, world_frame)
             continue
         poses[name] = tree.get(frame, world_frame)
-    return str(images[0]), camera_model, {n: scan_topics[n] for n in poses}, poses
+    return str(image), camera_model, {n: scan_topics[n] for n in poses}, poses
 
 
 def _frames_with_scans(rec: Recording, image_topic: str, scan_topics: Mapping[str, str],

@@ -82,9 +82,7 @@ def render_preview(
     with Recording(paths) as rec:
         topics = rec.topics()
         laser_topics = [t for t, i in topics.items() if i.msgtype == "sensor_msgs/msg/LaserScan"]
-        image_topics = [t for t, i in topics.items() if i.msgtype in ("sensor_msgs/msg/Image",
-                                                                      "sensor_msgs/msg/CompressedImage")
-                        and not t.endswith(("/labels", "/depth")) and "depth" not in t]
+        image_topics = rec.image_topics()
         truth_topics = [t for t, i in topics.items()
                         if i.msgtype in ("fusiontrack_msgs/msg/GroundTruth", "leg_tracker/msg/Person")
                         and t.count("/") <= 1]
