@@ -1029,6 +1029,10 @@ def _read_truth(path: Path, topic: str | None, time_source: str) -> tuple[list[A
                                   f"file (t or t_ns, id, x, y)")
             if all(not len(f.ids) for f in frames):
                 raise ConfigError(f"--topic {topic}: its {len(frames)} frames hold nobody")
+            if all("foot" in f.attributes for f in frames):  # the simulator's /ground_truth/steps
+                raise ConfigError(f"--topic {topic}: holds heel strikes (one per step), not where people are at each "
+                                  f"instant; eval scores tracks against "
+                                  f"{'/ground_truth' if '/ground_truth' in info else 'a topic of people positions'}")
             if all((np.asarray(f.ids) < 0).all() for f in frames if len(f.ids)):
                 raise ConfigError(f"--topic {topic}: its {info[topic].msgtype} positions carry no identities, "
                                   f"which scoring tracks needs; give the truth as a CSV file (t or t_ns, id, x, y)")
