@@ -262,6 +262,10 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         (["track", "{demo}", "-o", "{a_file}"], "is a file"),
         (["eval", "{tracks}", "{demo}", "-o", "{a_dir}"], "is a folder"),
         (["fit-step-model", "walk.csv", "-l", "10", "-o", "{a_dir}"], "is a folder"),
+        # an output that is the command's own input: refused before anything is written (it was overwritten)
+        (["events", "{tracks}", "--world", "{a_dir}", "-o", "{tracks}"], "is the input"),
+        (["eval", "{tracks}", "{demo}", "-o", "{tracks}"], "is the input"),
+        (["calibrate-road", "{two_points}", "-o", "{two_points}"], "is the input"),
         # eval's own options
         (["eval", "{binary}", "{demo}"], "binary.png: not a UTF-8 text file (expected JSON lines"),
         (["eval", "{tracks}", "{demo}", "--time", "lgo"], "--time: expected 'header' or 'log', got 'lgo'"),

@@ -13,7 +13,7 @@ import math
 import os
 import sys
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated, Any
@@ -251,11 +251,17 @@ def _out_folder(path: Path, option: str = "--output") -> Path:
     return path
 
 
-def _out_file(path: Path, example: str) -> Path:
-    """``--output`` that names a file: refused, naming it, when it is an existing folder or lies under a file."""
+def _out_file(path: Path, example: str, reads: Iterable[Path | None] = ()) -> Path:
+    """``--output`` that names a file: refused, naming it, when it is an existing folder, lies under a file, or is
+    one of the files the command ``reads`` (it would be overwritten: the input lost)."""
     if path.is_dir():
         raise ConfigError(f"--output {path}: is a folder; give a file name (e.g. {path / example})")
     _no_folder_under_a_file(path, "--output")
+    if path.exists():
+        for r in reads:
+            if r is not None and r.exists() and path.resolve() == r.resolve():
+                raise ConfigError(f"--output {path}: is the input {r} this command reads; writing it would lose it "
+                                  f"(give another file, e.g. {path.with_name(example)})")
     return path
 
 
@@ -882,7 +888,7 @@ def events(
     if (geometry is None) == (world is None):
         raise ConfigError("events: give the road as --geometry FILE.toml or --world world.json (exactly one)")
     if output is not None:
-        _out_file(output, "events.jsonl")
+        _out_file(output, "events.jsonl", reads=[*_track_files(tracks), geometry, world, rules])
     if geometry is not None:
         geo = load_road_geometry(geometry)
     else:
@@ -964,6 +970,12 @@ def _tracks_file(path: Path) -> Path:
     if path.is_dir():
         return path / "tracks.jsonl" if (path / "tracks.jsonl").exists() else path / "tracks.csv"
     return path
+
+
+def _track_files(path: Path) -> list[Path]:
+    """The tracks file ``path`` names, or both tracks files of a `fusiontrack track` folder (outputs must not
+    overwrite them)."""
+    return [path / "tracks.jsonl", path / "tracks.csv"] if path.is_dir() else [path]
 
 
 def _read_tracks(path: Path) -> tuple[list[Any], list[Any]]:
@@ -1086,7 +1098,7 @@ def eval_(
     if not (math.isfinite(threshold) and threshold > 0):  # (named by the option, not the library's threshold_m)
         raise ConfigError(f"--threshold: expected a distance > 0 in metres, got {threshold:g}")
     if output is not None:
-        _out_file(output, "metrics.json")
+        _out_file(output, "metrics.json", reads=[*_track_files(tracks), ground_truth])
     result: dict[str, Any] = {}
     boxes_at = ConfigError("--at: only for floor-plane tracks (image boxes are scored at their camera's frames)")
     if at is not None and (camera is not None or tracks.suffix == ".txt"):  # refused before any scoring
@@ -1408,7 +1420,7 @@ def calibrate_road_command(
     from .io.recording import Recording
     from .types import CameraInfo
 
-    _out_file(output, "road_calibration.json")
+    _out_file(output, "road_calibration.json", reads=[points, lenses])
     lens_models: dict[str, CameraInfo] = {}
     if lenses is not None:
         with Recording(lenses) as rec:
@@ -1509,7 +1521,7 @@ def fit_step_model(
 
     if len(length) != len(walks):
         raise ConfigError(f"--length: expected one per walk ({len(walks)}), got {len(length)}")
-    _out_file(output, "step_model.json")
+    _out_file(output, "step_model.json", reads=walks)
     model = step_model_from_files(walks, length, subject=subject)
     model.save(output)
     console.print(f"step length = {model.intercept_m:.3f} m + {model.slope_mps:.3f} m/s x duration "
