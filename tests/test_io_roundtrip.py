@@ -168,3 +168,24 @@ def test_a_topic_never_stamped_takes_the_log_time_without_a_warning(tmp_path, ca
     said = [r for r in caplog.records if "header stamps of 0" in r.getMessage()]
     assert [r.levelname for r in said] == ["INFO"]
     assert "3 of 3 messages" in said[0].getMessage()
+
+
+def test_a_folders_one_mcap_file_given_alone_is_read_with_the_folders_sensor_map(tmp_path):
+    """``road/road.mcap`` (the README's ``site.mcap``) is read as its folder ``road``: the sensor map is in the
+    folder's metadata.yaml. Read without it, each topic was its own sensor: a camera's images lost their
+    CameraInfo, and the traffic and wearable pipelines dropped every camera without a word."""
+    recs = sample_records(np.random.default_rng(6))
+    image = next(r for r in recs if isinstance(r, Image))
+    with RecordingWriter(tmp_path / "site") as w:
+        w.write(image, topic="/front/image")
+    (mcap,) = (tmp_path / "site").glob("*.mcap")
+    for given in (tmp_path / "site", mcap):
+        with Recording(given) as rec:
+            assert rec.sensor_of("/front/image") == image.sensor
+            assert rec.paths == [tmp_path / "site"]
+    # a loose MCAP file (no folder metadata listing it) is read as itself
+    loose = tmp_path / "loose.mcap"
+    loose.write_bytes(mcap.read_bytes())
+    with Recording(loose) as rec:
+        assert rec.paths == [loose]
+        assert rec.sensor_of("/front/image") == "/front/image"

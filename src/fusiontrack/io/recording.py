@@ -30,7 +30,7 @@ from rosbags.interfaces import Connection
 
 from ..errors import ConfigError, MessageTypeError, RecordingError, TopicError
 from ..types import Message
-from .recover import recording_kind
+from .recover import _folder_metadata, recording_kind
 from .ros import (
     FROM_ROS,
     HEADERLESS,
@@ -76,6 +76,18 @@ class TopicInfo:
         """Mean message rate; 0 for fewer than two messages."""
         span = self.t_end_ns - self.t_start_ns
         return (self.count - 1) / (span / 1e9) if self.count > 1 and span > 0 else 0.0
+
+
+def _whole_bag(path: Path) -> Path:
+    """A rosbag2 folder's one storage file, given alone, is read as its folder: the folder's ``metadata.yaml`` holds
+    what the file does not (fusiontrack's sensor map: read without it, every topic is its own sensor, a camera's
+    images lose their CameraInfo and a traffic or wearable run drops its cameras)."""
+    if path.is_file() and path.suffix.lower() in (".mcap", ".db3"):
+        listed = _folder_metadata(path.parent).get("relative_file_paths")
+        if listed == [path.name]:
+            log.debug("%s: read as its rosbag2 folder %s", path, path.parent)
+            return path.parent
+    return path
 
 
 def _colour_image(topic: str) -> bool:
@@ -205,7 +217,7 @@ class Recording:
     ) -> None:
         if isinstance(paths, str | Path):
             paths = [paths]
-        self.paths = [Path(p) for p in paths]
+        self.paths = [_whole_bag(Path(p)) for p in paths]
         if not self.paths:
             raise RecordingError("no recording given: expected at least one bag, MCAP or db3 path")
         missing = [str(p) for p in self.paths if not p.exists()]
