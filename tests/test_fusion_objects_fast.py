@@ -79,3 +79,23 @@ def test_buffer_moves_detections_with_their_velocity() -> None:
     assert moved.features is d.features
     assert not moved.position_m.flags.writeable
     assert np.allclose(d.position_m, [1.0, 0.0])
+
+
+def test_a_tie_of_the_cameras_class_votes_does_not_depend_on_the_hash_seed() -> None:
+    """Two cameras see one object, one says car and the other bicycle (no laser box): the class was the set of votes'
+    first by string hash, so it changed with PYTHONHASHSEED between identical runs. Each interpreter below runs the
+    same fusion with another hash seed: one answer, the first camera's vote."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("import numpy as np\n"
+            "from fusiontrack.fusion.objects import fuse_objects\n"
+            "from fusiontrack.types import Detection\n"
+            "d = lambda s, c: Detection(0, s, [5.0, 1.0], np.eye(2) * 0.1, box_px=[0, 0, 10, 10], cls=c)\n"
+            "two = {'camera_0': [d('camera_0', 'car')], 'camera_1': [d('camera_1', 'bicycle')]}\n"
+            "print(fuse_objects(two)[0].cls)\n")
+    got = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                          env={**os.environ, "PYTHONHASHSEED": str(h)}).stdout.strip()
+           for h in range(6)}
+    assert got == {"car"}

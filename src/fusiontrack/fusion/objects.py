@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from typing import Any
@@ -203,7 +204,9 @@ def _object(members: list[Detection], pos: np.ndarray, cov: np.ndarray, p: Objec
         dims = np.array([length, width, float(box[4])])
     else:
         votes = [d.cls for d in members if d.cls != ObjectClass.UNKNOWN]
-        cls = max(set(votes), key=votes.count) if votes else ObjectClass.UNKNOWN
+        # the most votes; a tie goes to the first member's (a set's order would follow PYTHONHASHSEED: one run
+        # called a car what the next called a bicycle)
+        cls = Counter(votes).most_common(1)[0][0] if votes else ObjectClass.UNKNOWN
         dims = None
     conf = min(1.0, p.confidence_laser * len(lasers) + p.confidence_camera * len(cams))
     box_px = {d.sensor: d.box_px for d in cams}
