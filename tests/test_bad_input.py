@@ -262,6 +262,19 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         (["track", "{demo}", "-o", "{a_file}"], "is a file"),
         (["eval", "{tracks}", "{demo}", "-o", "{a_dir}"], "is a folder"),
         (["fit-step-model", "walk.csv", "-l", "10", "-o", "{a_dir}"], "is a folder"),
+        # a pipeline's options given to another pipeline (traffic and wearable ran on, ignoring them)
+        (["track", "{demo}", "-o", "{out}", "--pipeline", "traffic", "--max-frames", "3"],
+         "--max-frames: only for --pipeline people-camera (got --pipeline traffic)"),
+        (["track", "{demo}", "-o", "{out}", "--pipeline", "wearable", "--detections", "{mot}"],
+         "--detections: only for --pipeline people-camera (got --pipeline wearable)"),
+        (["track", "{demo}", "-o", "{out}", "--pipeline", "wearable", "--time", "log"],
+         "--time: the wearable pipeline reads its sensors by their header stamps only"),
+        (["track", "{video}", "-o", "{out}", "--pipeline", "people-camera", "--camera-topic", "/foo"],
+         "is a video file (it has no topics)"),
+        (["track", "{video}", "-o", "{out}", "--pipeline", "people-camera", "--detection-scale", "0.5"],
+         "--detection-scale: scales the boxes of --detections, and none were given"),
+        (["track", "{video}", "-o", "{out}", "--pipeline", "people-camera", "--detections", "{mot}", "--min-score",
+          "nan"], "--min-score: expected a finite detection score, got nan"),
         # an output that is the command's own input: refused before anything is written (it was overwritten)
         (["events", "{tracks}", "--world", "{a_dir}", "-o", "{tracks}"], "is the input"),
         (["eval", "{tracks}", "{demo}", "-o", "{tracks}"], "is the input"),
@@ -324,6 +337,7 @@ def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args
              "a_file": str(tmp_path / "a_file"), "a_dir": str(tmp_path / "a_dir"), "tracks": str(tracks),
              "hall": str(tmp_path / "hall.toml"), "two_points": str(tmp_path / "two_points.csv"),
              "mot": str(tmp_path / "det.txt"), "binary": str(tmp_path / "binary.png"),
+             "video": str(shared_data / "video/pets09_s2l1/vtest_pets09_s2l1_480x360.avi"),
              **{name: str(tmp_path / f"{name}.toml") for name in tables}}
     result = _cli(*[a.format(**subst) for a in args])
     assert result.returncode == 2

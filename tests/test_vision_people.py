@@ -356,6 +356,17 @@ def test_bad_inputs_are_clear_errors(shared_data, tmp_path):
         track_camera(laser_bag)
 
 
+def test_a_score_threshold_above_every_detection_is_warned_of(shared_data, caplog):
+    """PETS09's public detections score 0.5-0.998: --min-score 50 (a percentage typed for a fraction) leaves none,
+    and the run gave 0 tracks without a word."""
+    with caplog.at_level("WARNING", logger="fusiontrack"):
+        states, _, _ = track_camera(shared_data / VIDEO, detections=shared_data / DETS, detection_scale=0.625,
+                                    max_frames=3, min_score=50.0)
+    assert not states
+    assert any("min_score 50 is above every detection's score (0.5 to 0.998)" in r.getMessage()
+               for r in caplog.records)
+
+
 @pytest.mark.parametrize(("args", "message"), [
     (["--detections", "nowhere.txt"], "nowhere.txt: no such file"),
     ([], "no image topic"),

@@ -620,6 +620,23 @@ def track(
                           f"{pipeline})")
     if pipeline == "people-camera" and seed is not None:
         raise ConfigError("--seed: the people-camera pipeline draws no random numbers (it has no particle filter)")
+    camera_only = {"--detections": detections is not None, "--detection-scale": detection_scale != 1.0,
+                   "--min-score": min_score is not None,
+                   "--camera-topic": camera_topic is not None and pipeline != "people",  # people: its camera
+                   "--max-frames": max_frames is not None}
+    if pipeline != "people-camera" and any(camera_only.values()):  # (traffic and wearable ignored them)
+        given = ", ".join(k for k, v in camera_only.items() if v)
+        raise ConfigError(f"{given}: only for --pipeline people-camera (got --pipeline {pipeline})")
+    if pipeline == "people-camera":
+        if detection_scale != 1.0 and detections is None:
+            raise ConfigError("--detection-scale: scales the boxes of --detections, and none were given")
+        if min_score is not None and not math.isfinite(min_score):
+            raise ConfigError(f"--min-score: expected a finite detection score, got {min_score}")
+        video_in = len(recordings) == 1 and recordings[0].suffix.lower() in VIDEO_SUFFIXES
+        if camera_topic is not None and video_in:
+            raise ConfigError(f"--camera-topic: {recordings[0]} is a video file (it has no topics)")
+    if pipeline == "wearable" and time_source != "header":
+        raise ConfigError("--time: the wearable pipeline reads its sensors by their header stamps only")
     before = _snapshot(output)  # the earlier run's outputs, to remove those this run does not rewrite
     if pipeline == "wearable":
         _track_wearable(recordings, output, config=config, seed=seed)
@@ -641,13 +658,6 @@ def track(
                       time_source=time_source, video=video)
         _drop_stale_outputs(output, before)
         return
-    camera_only = {"--detections": detections is not None, "--detection-scale": detection_scale != 1.0,
-                   "--min-score": min_score is not None,
-                   "--camera-topic": camera_topic is not None and pipeline != "people",  # people: its camera
-                   "--max-frames": max_frames is not None}
-    if any(camera_only.values()):
-        given = ", ".join(k for k, v in camera_only.items() if v)
-        raise ConfigError(f"{given}: only for --pipeline people-camera (got --pipeline {pipeline})")
     from .tracking.tracker import track_recording
 
     cfg = _load_config(config)
@@ -680,8 +690,6 @@ def track(
             if not fstats.camera:
                 console.print("[yellow]no usable camera: people tracked with the lasers only[/yellow]")
             elif fstats.bias is not None:
-                import math
-
                 from .calibration.bias_run import write_bias_history
 
                 output.mkdir(parents=True, exist_ok=True)

@@ -941,6 +941,10 @@ def track_camera(
         det = detections if isinstance(detections, MotBoxes) else read_mot(detections)
         if detection_scale != 1.0:
             det = det.scaled(detection_scale)
+        if len(det.conf) and np.isfinite(min_score) and not np.any(det.conf >= min_score):
+            log.warning("%s: min_score %g is above every detection's score (%.3g to %.3g): no detection is used",
+                        detections if isinstance(detections, str | Path) else "detections", min_score,
+                        float(np.min(det.conf)), float(np.max(det.conf)))
     frames = _Frames(source, camera_topic, camera, time_source)
     try:
         with opencv_threads(1):  # small frames: OpenCV's worker threads cost more CPU than they save
