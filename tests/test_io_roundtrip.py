@@ -189,3 +189,13 @@ def test_a_folders_one_mcap_file_given_alone_is_read_with_the_folders_sensor_map
     with Recording(loose) as rec:
         assert rec.paths == [loose]
         assert rec.sensor_of("/front/image") == "/front/image"
+
+
+@pytest.mark.parametrize("name", ["out.mcap", "out.db3", "out.bag"])
+def test_a_recording_named_like_a_file_is_refused(tmp_path, name):
+    """A rosbag2 recording is a folder: -o out.mcap made a folder out.mcap holding out.mcap.mcap."""
+    from fusiontrack.errors import RecordingError
+
+    with pytest.raises(RecordingError, match=r"written as a rosbag2 folder .* name the folder, e.g. .*out$"):
+        RecordingWriter(tmp_path / name)
+    assert not (tmp_path / name).exists()

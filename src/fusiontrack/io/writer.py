@@ -92,6 +92,10 @@ class RecordingWriter:
             raise RecordingError(f"{self.path}: already exists; fusiontrack does not overwrite recordings")
         if storage not in ("mcap", "sqlite3"):
             raise RecordingError(f"storage: expected 'mcap' or 'sqlite3', got {storage!r}")
+        if self.path.suffix.lower() in (".mcap", ".db3", ".bag"):
+            # (rosbags would make a folder x.mcap holding x.mcap.mcap)
+            raise RecordingError(f"{self.path}: a recording is written as a rosbag2 folder (its {storage} file and "
+                                 f"metadata.yaml inside); name the folder, e.g. {self.path.with_suffix('')}")
         self.typestore: Typestore = build_typestore(custom_types)
         self.encoder = RosEncoder(self.typestore, image_format)
         plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
