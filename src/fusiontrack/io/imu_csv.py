@@ -346,6 +346,10 @@ _GENERIC_DOC = "a header with t_ns, t_ms or t_s, ax, ay, az (m/s^2) and optional
 _PHONE_GYRO_MAX_RADPS = 35.0  # phone gyroscopes saturate at 2000 deg/s (34.9 rad/s)
 
 
+_MAX_SAMPLE_STEP_S = 1.0
+"""A generic IMU CSV whose median sample interval is longer than this has its times in a wrong unit."""
+
+
 def _read_generic(path: Path, sensor: str, frame_id: str) -> ImuCsv:
     table = read_numeric_table(path, header=True, what=_GENERIC_DOC, skip_bad_rows=True)
     names = [n.lower() for n in table.header or []]
@@ -374,6 +378,12 @@ def _read_generic(path: Path, sensor: str, frame_id: str) -> ImuCsv:
         t_ns = np.rint(t * (1e6 if name == "t_ms" else 1e9)).astype(np.int64)
     keep = _stray_ends(path, t_ns, table.line_numbers, _check_time_order(path, t_ns, table.line_numbers))
     table, t_ns = _keep(table, keep), t_ns[keep]
+    step_s = float(np.median(np.diff(t_ns))) / 1e9 if t_ns.size >= 2 else 0.0
+    if step_s > _MAX_SAMPLE_STEP_S:  # a phone's IMU samples at 10-500 Hz: a wrong unit, not a slow sensor
+        finer = {"t_s": "milliseconds (name the column t_ms)", "t_ms": "microseconds (in ns: name it t_ns)",
+                 "t_ns": "not nanoseconds"}[name]
+        raise RecordingError(f"{path}: {name}: the samples are {step_s:.4g} s apart (median), "
+                             f"{1 / step_s:.3g} Hz, too slow for an IMU; are the times {finer}?")
     accel = table.values[:, accel_cols]
     norm = np.linalg.norm(accel, axis=1)
     if np.median(norm) < 0.3 * G_MPS2:
