@@ -436,6 +436,8 @@ def test_calibrate_road_command_recovers_the_road_recordings_true_poses(road_rec
     assert "camera_0" in result.output
     assert "laser_1" in result.output
     assert "rms px" in result.output
+    assert "lenses from" in result.output  # (the lenses used, named)
+    assert "camera_0, camera_1" in " ".join(result.output.split())
     calib = RoadCalibration.load(out)
     assert set(calib.cameras) == set(cams)
     assert set(calib.lasers) == set(lasers)
@@ -451,6 +453,24 @@ def test_calibrate_road_command_recovers_the_road_recordings_true_poses(road_rec
         fitted = calib.laser(name)
         np.testing.assert_allclose(fitted.t, T[:2, 3], atol=0.05)
         assert abs(math.degrees(fitted.yaw_rad - math.atan2(T[1, 0], T[0, 0]))) < 0.5
+
+
+def test_lenses_of_other_cameras_are_warned_of_not_ignored(road_recording, tmp_path, shared_data, caplog):
+    """--lenses with a recording whose CameraInfo names none of the survey's cameras (an RGB-D bag's) gave the
+    same calibration as without it, without a word."""
+    from typer.testing import CliRunner
+
+    from fusiontrack.cli import app
+
+    points, _, _ = _survey(road_recording, tmp_path / "survey.csv", np.random.default_rng(3))
+    other = shared_data / "rgbd/tue_rgbd_people/2019-05-03-12-41-38.bag"
+    with caplog.at_level("WARNING", logger="fusiontrack"):
+        result = CliRunner().invoke(app, ["calibrate-road", str(points), "-o", str(tmp_path / "c.json"),
+                                          "--lenses", str(other)])
+    assert result.exit_code == 0, result.output
+    (msg,) = [r.getMessage() for r in caplog.records if "--lenses" in r.getMessage()]
+    assert "no CameraInfo of camera_0, camera_1" in msg
+    assert "their pixels are used as they are" in msg
 
 
 def test_the_traffic_pipeline_poses_its_sensors_by_the_road_calibration(road_recording, tmp_path):

@@ -1440,6 +1440,15 @@ def calibrate_road_command(
                 if info is not None:
                     lens_models[name] = info
     calib = calibrate_road(points, lenses=lens_models, refine=refine)
+    if lenses is not None:  # which cameras' pixels were undistorted: a name that matches none was ignored unsaid
+        cams = sorted(calib.cameras)
+        used = [c for c in cams if c in lens_models]
+        if used:
+            console.print(f"lenses from {lenses}: {', '.join(used)}")
+        unmatched = [c for c in cams if c not in lens_models]
+        if unmatched:
+            log.warning("--lenses %s: no CameraInfo of %s (its cameras: %s); their pixels are used as they are",
+                        lenses, ", ".join(unmatched), ", ".join(sorted(lens_models)) or "none readable")
     saved = calib.save(output)
     table = Table(title=f"road calibration from {points} (residuals at the control points)")
     for col in ("sensor", "kind", "points", "rms m", "max m", "rms px", "max px"):
