@@ -523,6 +523,7 @@ def test_view_makes_its_output_folder_but_not_for_a_bad_suffix(shared_data, tmp_
 
 
 @pytest.mark.parametrize(("option", "value"), [("--fps", "-5"), ("--fps", "0"), ("--fps", "nan"),
+                                               ("--fps", "0.001"), ("--fps", "100000"),  # (the codec was blamed)
                                                ("--max-frames", "-3"), ("--max-frames", "0")])
 def test_view_refuses_a_bad_frame_rate_or_frame_count(shared_data, tmp_path, option, value):
     """view --fps -5 wrote a 1 fps video and --max-frames -3 one frame, both saying nothing: now an error naming the

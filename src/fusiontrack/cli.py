@@ -454,8 +454,9 @@ def view(
 
     if max_frames is not None and max_frames < 1:  # (said before any folder is made for the video)
         raise ConfigError(f"--max-frames: expected a number of frames >= 1, got {max_frames}")
-    if fps is not None and not (math.isfinite(fps) and fps > 0):
-        raise ConfigError(f"--fps: expected a positive frame rate, got {fps}")
+    if fps is not None and not (math.isfinite(fps) and 0.1 <= fps <= 1000):  # (what the encoders take and players
+        # show: mp4v failed at 0.001 and 65536 with a message about the codec)
+        raise ConfigError(f"--fps: expected a frame rate from 0.1 to 1000 frames per second, got {fps:g}")
     _no_folder_under_a_file(output, "--output")
     if not output.parent.exists():
         if output.suffix.lower() not in VIDEO_WRITE_SUFFIXES:
