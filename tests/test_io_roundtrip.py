@@ -199,3 +199,25 @@ def test_a_recording_named_like_a_file_is_refused(tmp_path, name):
     with pytest.raises(RecordingError, match=r"written as a rosbag2 folder .* name the folder, e.g. .*out$"):
         RecordingWriter(tmp_path / name)
     assert not (tmp_path / name).exists()
+
+
+def test_a_topic_never_stamped_beside_topics_on_another_clock_is_warned_of(tmp_path, caplog):
+    """leg_tracker's training bags: the scans carry 2014 header stamps, logged in 2015, and the cluster positions
+    carry none, so they took the 2015 log times: converted, a 380-day recording whose labels paired with no scan."""
+    recs = sample_records(np.random.default_rng(5))
+    scan, imu = recs[0], recs[7]
+    day = 86_400 * 10**9
+    with RecordingWriter(tmp_path / "r") as w:
+        for k in range(3):
+            w.write(dataclasses.replace(scan, t_ns=scan.t_ns + k), log_t_ns=scan.t_ns + 380 * day + k)
+            w.write(dataclasses.replace(imu, t_ns=0), log_t_ns=scan.t_ns + 380 * day + k)
+    with caplog.at_level("WARNING", logger="fusiontrack"), Recording(tmp_path / "r") as rec:
+        list(rec.messages())
+    (msg,) = [r.getMessage() for r in caplog.records if "two clocks" in r.getMessage()]
+    assert f"{default_topic(imu)}: never stamped" in msg
+    assert f"the header times of {default_topic(scan)} are up to 380.0 days from their log times" in msg
+    assert "--time log" in msg
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="fusiontrack"), Recording(tmp_path / "r") as rec:
+        list(rec.messages(time_source="log"))  # one clock: nothing to say
+    assert not [r for r in caplog.records if "two clocks" in r.getMessage()]

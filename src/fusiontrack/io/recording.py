@@ -569,6 +569,7 @@ class Recording:
         reasons: dict[str, str] = {}
         unstamped: Counter[str] = Counter()  # header stamps of 0: the log time stands in
         read: Counter[str] = Counter()
+        skew: dict[str, int] = {}  # per stamped topic, its first message's header time - log time
         for conn, log_ns, raw in self._raw(conns, start_ns, stop_ns):
             reader = owners[id(conn)]
             sensor = self.sensor_of(conn.topic)
@@ -584,6 +585,8 @@ class Recording:
                         if not fast.t_ns:
                             unstamped[conn.topic] += 1
                             fast = with_time(fast, log_ns)
+                        elif conn.topic not in skew:
+                            skew[conn.topic] = fast.t_ns - log_ns
                     else:
                         fast = with_time(fast, log_ns)
                     yield conn.topic, fast
@@ -596,6 +599,8 @@ class Recording:
                     if not t_ns:
                         unstamped[conn.topic] += 1
                         t_ns = log_ns
+                    elif conn.topic not in skew:
+                        skew[conn.topic] = t_ns - log_ns
                 out = FROM_ROS[conn.msgtype](msg, t_ns, sensor, conn.topic)
             except Exception as err:  # one bad message must not end the stream
                 skipped[conn.topic] += 1
@@ -618,6 +623,20 @@ class Recording:
                         "; ".join(f"{t}: {unstamped[t]} of {read[t]} messages"
                                   + (" (the others are stamped: two clocks in one topic)" if level == logging.WARNING
                                      else "") for t in which))
+        # a topic never stamped reads the recorder's clock; if the stamped topics' header times are far from their
+        # log times (a bag re-recorded later, a sensor's own clock), the two sets of times do not line up
+        apart = {t: d for t, d in skew.items() if abs(d) > 1_000_000_000}
+        never = [t for t, n in unstamped.items() if n == read[t]]
+        if never and apart:
+            log.warning("%s: never stamped, read at the recorder's log times, while the header times of %s are up "
+                        "to %s from their log times: two clocks; read with --time log (time_source='log') to put "
+                        "every topic on the recorder's clock", ", ".join(never), ", ".join(sorted(apart)),
+                        _span_text(max(abs(d) for d in apart.values())))
+
+
+def _span_text(ns: int) -> str:
+    s = ns / 1e9
+    return f"{s / 86400:.1f} days" if s >= 86400 else f"{s / 3600:.1f} h" if s >= 3600 else f"{s:.1f} s"
 
 
 def open_recording(paths: str | Path | Sequence[str | Path], **kwargs: Any) -> Recording:
