@@ -82,7 +82,8 @@ def test_frame_3_entered_together_stay_merged_join_and_shared_with_a_correlated(
     # T0 (never merged) sees two segments of its own: not a split -- it keeps the nearest (D0), D1 may
     # become a new target. M1 stays merged. M2 and T3 share D3 and see nothing else: they merge
     # (a third person joins a merged target). T4 finds D4 and D5; T5 finds only D4, shared with T4,
-    # which found two: no merge, both correlated.
+    # which found two: no merge, both correlated; D5, found by T4 alone and not its nearest, may become a new
+    # target too (if no target is assigned it: a person beside a correlated pair).
     frame = run(
         targets=[(5.0, 5.0), (10.0, 5.0), (14.0, 5.0), (14.9, 5.0), (2.0, 2.0), (2.7, 2.0)],
         merged=[False, True, True, False, False, False],
@@ -91,8 +92,8 @@ def test_frame_3_entered_together_stay_merged_join_and_shared_with_a_correlated(
     assert frame.target_labels.tolist() == [TL.CORRELATED, TL.MERGED, TL.MERGING, TL.MERGING,
                                             TL.CORRELATED, TL.CORRELATED]
     assert frame.det_labels.tolist() == [DL.MATCHED, DL.SPLIT_CANDIDATE, DL.MATCHED, DL.SHARED, DL.SHARED,
-                                         DL.MATCHED]
-    assert frame.split_candidates.tolist() == [1]
+                                         DL.SPLIT_CANDIDATE]
+    assert frame.split_candidates.tolist() == [1, 5]
     assert {k: v.tolist() for k, v in frame.merge_groups.items()} == {3: [2, 3]}
     assert frame.nearest_det.tolist() == [0, 2, 3, 3, 4, 4]
 

@@ -18,7 +18,9 @@ Rules (B7), evaluated in this order:
 2. **Split** — a merged target with ``c = 2`` whose gated detections all have ``r = 1``: ``SPLITTING``
    (identity recovery, B17). A *non-merged* target in that position is not a split: it keeps its
    nearest detection and its other detections are ``SPLIT_CANDIDATE`` (new targets once they
-   persist ``N_confirm`` frames).
+   persist ``N_confirm`` frames). So are those found by it alone (``r = 1``) when another of its detections
+   is shared (``r = 2``) [RECON completion: otherwise a person walking beside a correlated pair, whose segment
+   lies only in the gate of a target that keeps its nearest detection, is never assigned and never born].
 3. **Correlated** — a non-merged target with ``c = 2``: ``CORRELATED`` (B16). So is a non-merged
    target with ``c = 1`` whose detection is shared with a target that found two (rule 1 does not
    fire, rule 4 does not apply; it interacts with that target) [RECON completion].
@@ -224,7 +226,7 @@ def classify_situations(c: np.ndarray, r: np.ndarray, found: np.ndarray, merged_
             lab = _T_NONCORRELATED
         else:  # rule 3 and its completion
             lab = _T_CORRELATED
-        if ci == 2 and all_r1[i] and not merged_l[i]:  # unmerged, c = 2, r = 1 everywhere: not a split
+        if ci == 2 and not merged_l[i]:  # unmerged, c = 2: not a split; its other detections found by it alone
             apart_rows.append(i)
         labels_l[i] = lab
         if merging[i]:
@@ -246,7 +248,7 @@ def classify_situations(c: np.ndarray, r: np.ndarray, found: np.ndarray, merged_
         for i in apart_rows:
             extra[nearest_l[i]] = False
         for j in range(n_d):
-            if extra[j] and r_l[j] != 0:
+            if extra[j] and r_l[j] == 1:
                 det_l[j] = _D_SPLIT_CANDIDATE
     det_labels = np.array(det_l, dtype=np.int8)
     # (the frozen dataclass's own constructor sets each field through object.__setattr__: slower than the slots')
