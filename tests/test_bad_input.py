@@ -584,29 +584,38 @@ def test_an_output_under_a_file_is_refused_before_any_work(shared_data, tmp_path
     assert "Traceback" not in result.stderr
 
 
-def test_a_recording_stopped_part_way_is_removed_not_left_looking_whole(tmp_path):
+def test_a_recording_stopped_part_way_is_removed_not_left_looking_whole(tmp_path, caplog):
     """convert / simulate stopped by Ctrl-C (or an error) left a recording that opened and looked whole with half
-    of the data; a folder that was there before is not ours to remove."""
-    from fusiontrack.cli import _whole_or_nothing
+    of the data: the writer now removes the folder it created. What it did not create is never touched: a folder
+    that was there (or that another run made first) is refused, and stays as it was."""
+    from fusiontrack.errors import RecordingError
     from fusiontrack.io.recording import Recording
     from fusiontrack.io.writer import RecordingWriter
 
     out = tmp_path / "new"
     scan = LaserScan(10**9, "laser", "laser", -1.0, 0.02, 0.02, 5.0, np.ones(100, np.float32))
+
     def stopped() -> None:
-        with _whole_or_nothing(out), RecordingWriter(out) as w:
+        with RecordingWriter(out) as w:
             w.write(scan)
             raise KeyboardInterrupt
 
-    with pytest.raises(KeyboardInterrupt):
+    with caplog.at_level("WARNING", logger="fusiontrack"), pytest.raises(KeyboardInterrupt):
         stopped()
     assert not out.exists()
-    with _whole_or_nothing(out), RecordingWriter(out) as w:  # finished: kept
+    assert any("the incomplete recording" in r.getMessage() for r in caplog.records)
+    with RecordingWriter(out) as w:  # finished: kept
         w.write(scan)
     with Recording(out) as rec:
         assert len(list(rec.messages())) == 1
     theirs = tmp_path / "theirs"
     theirs.mkdir()
-    with pytest.raises(KeyboardInterrupt), _whole_or_nothing(theirs):
-        raise KeyboardInterrupt
-    assert theirs.is_dir()
+    (theirs / "data.txt").write_text("precious")
+
+    def refused() -> None:
+        with RecordingWriter(theirs) as w:
+            w.write(scan)
+
+    with pytest.raises(RecordingError, match="already exists"):
+        refused()
+    assert (theirs / "data.txt").read_text() == "precious"

@@ -7,7 +7,6 @@ Errors a user can cause end as one line on stderr and a non-zero exit code, neve
 from __future__ import annotations
 
 import collections
-import contextlib
 import json
 import logging
 import math
@@ -342,8 +341,7 @@ def convert(
                     (topic is not None and t.topic in topic)]
         total = sum(t.count for t in selected)
         poses = _pose_transforms(rec, cfg.laser_poses(), [t.topic for t in selected], time_source)
-        with _whole_or_nothing(output), RecordingWriter(output, storage=storage) as writer, \
-                progress() as bar:  # type: ignore[arg-type]
+        with RecordingWriter(output, storage=storage) as writer, progress() as bar:  # type: ignore[arg-type]
             n = writer.write_all(poses)
             # each record keeps the topic it was read from (a simulated camera's label images are Image records
             # of the camera's sensor too: by type alone they were written onto its image topic), carried through
@@ -361,24 +359,6 @@ def convert(
     console.print(f"wrote {n} messages to {output}"
                   + (f" ({dropped} dropped as too far out of order)" if dropped else "")
                   + (f" ({sum(rec.skipped.values())} unreadable skipped)" if rec.skipped else ""))
-
-
-@contextlib.contextmanager
-def _whole_or_nothing(output: Path) -> Iterator[None]:
-    """A new recording ``output`` (it does not exist yet) is removed if writing it stops part way (Ctrl-C, an
-    error): a cut-off recording opens and looks whole. Said on the console; the interruption goes on."""
-    if output.exists():  # (the writer refuses it: nothing of ours to remove)
-        yield
-        return
-    try:
-        yield
-    except BaseException:
-        if output.exists():
-            import shutil
-
-            shutil.rmtree(output) if output.is_dir() else output.unlink()
-            console.print(f"[yellow]stopped: the incomplete {output} was removed[/yellow]")
-        raise
 
 
 class _Topical:
@@ -528,7 +508,7 @@ def simulate(
         raise ConfigError(f"--seed: expected an integer >= 0, got {seed}")
     sc = load_scenario(scenario).with_overrides(seconds=seconds, seed=seed, settings=_parse_settings(set_))
     duration = sc.config.scenario.duration_s
-    with progress() as bar, _whole_or_nothing(output):
+    with progress() as bar:
         task = bar.add_task(f"simulating {sc.name}", total=duration)
         result = run_simulation(sc, output, progress=lambda t: bar.update(task, completed=t))
     msgs = ", ".join(f"{name} {n}" for name, n in result.messages.items())

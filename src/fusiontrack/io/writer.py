@@ -23,6 +23,7 @@ bag's metadata, so reading it back gives every record its original ``sensor``.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, Literal
@@ -44,6 +45,8 @@ from ..types import (
 )
 from .recording import SENSOR_MAP_KEY
 from .ros import RosEncoder, build_typestore, sensor_map_to_json
+
+log = logging.getLogger(__name__)
 
 _SUFFIX: dict[type, str] = {
     LaserScan: "scan",
@@ -103,16 +106,34 @@ class RecordingWriter:
         self._connections: dict[tuple[str, str], Any] = {}
         self._sensors: dict[str, str] = {}
         self.count = 0
+        self._made: Path | None = None  # the folder this writer created (rosbags' open makes it, or fails)
         try:
             self._writer.open()
         except Exception as err:
             raise RecordingError(f"{self.path}: cannot create the recording: {err}") from err
+        self._made = self.path
 
     def __enter__(self) -> RecordingWriter:
         return self
 
     def __exit__(self, exc_type: object, *exc: object) -> None:
-        self.close()
+        if exc_type is None:
+            self.close()
+            return
+        try:  # stopped part way (Ctrl-C, an error): a cut-off recording opens and looks whole
+            self.close()
+        except Exception:  # (closing must not hide the error that stopped the writing)
+            log.debug("error while closing %s", self.path, exc_info=True)
+        self.discard()
+
+    def discard(self) -> None:
+        """Remove the recording this writer created (an incomplete one), with a warning; nothing else."""
+        made, self._made = self._made, None
+        if made is not None and made.is_dir():
+            import shutil
+
+            shutil.rmtree(made, ignore_errors=True)
+            log.warning("stopped: the incomplete recording %s was removed", made)
 
     def _connection(self, topic: str, msgtype: str) -> Any:
         key = (topic, msgtype)
