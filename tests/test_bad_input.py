@@ -279,6 +279,9 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         (["events", "{tracks}", "--world", "{a_dir}", "-o", "{tracks}"], "is the input"),
         (["eval", "{tracks}", "{demo}", "-o", "{tracks}"], "is the input"),
         (["calibrate-road", "{two_points}", "-o", "{two_points}"], "is the input"),
+        (["events", "{tracks}", "--world", "{a_dir}", "--truth", "{tmp}", "-o", "{tmp}/incidents.jsonl"],
+         "is the input"),  # (a run folder's file read by --truth)
+        (["eval", "{tmp}", "{mot}", "-o", "{tmp}/tracks_mot.txt"], "is the input"),  # (a people-camera folder's)
         # eval's own options
         (["eval", "{binary}", "{demo}"], "binary.png: not a UTF-8 text file (expected JSON lines"),
         (["eval", "{tracks}", "{demo}", "--time", "lgo"], "--time: expected 'header' or 'log', got 'lgo'"),
@@ -330,6 +333,8 @@ def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args
                                         'pose = { x = 0.0, y = 0.0, z = 3.0, yaw_deg = 0.0 }\n')
     (tmp_path / "two_points.csv").write_text("x_m,y_m,z_m,u_px,v_px\n0,0,0,100,400\n1,0,0,200,400\n")
     (tmp_path / "det.txt").write_text("1,1,10,10,20,40,1,-1,-1,-1\n")
+    (tmp_path / "incidents.jsonl").write_text("")  # (a run folder's true incidents, and a people-camera folder's
+    (tmp_path / "tracks_mot.txt").write_text("1,1,10,10,20,40,1,-1,-1,-1\n")  # image boxes: inputs to keep)
     tracks = tmp_path / "tracks.csv"
     write_tracks_csv(tracks, [TrackState(10**18, "laser", 1, np.zeros(2), np.zeros(2))])
     subst = {"demo": str(shared_data / DEMO), "out": str(tmp_path / "o"), "cfg": str(cfg), "junk": str(junk),
@@ -337,7 +342,7 @@ def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args
              "a_file": str(tmp_path / "a_file"), "a_dir": str(tmp_path / "a_dir"), "tracks": str(tracks),
              "hall": str(tmp_path / "hall.toml"), "two_points": str(tmp_path / "two_points.csv"),
              "mot": str(tmp_path / "det.txt"), "binary": str(tmp_path / "binary.png"),
-             "video": str(shared_data / "video/pets09_s2l1/vtest_pets09_s2l1_480x360.avi"),
+             "video": str(shared_data / "video/pets09_s2l1/vtest_pets09_s2l1_480x360.avi"), "tmp": str(tmp_path),
              **{name: str(tmp_path / f"{name}.toml") for name in tables}}
     result = _cli(*[a.format(**subst) for a in args])
     assert result.returncode == 2

@@ -160,3 +160,35 @@ def test_the_people_pipelines_read_the_raw_images_beside_their_compressed_copy(f
     _, _, cam_stats = track_camera(both, max_frames=10)
     assert cam_stats.sensor == "/camera_0/image"  # (a foreign recording's sensors are its topics)
     assert cam_stats.n_frames == 10
+
+
+def test_the_traffic_pipeline_counts_one_camera_not_its_streams(tmp_path: Path, caplog) -> None:
+    """A camera known by /ns/camera_info, with its images raw and compressed and its depth images beside them: the
+    traffic branches warned that '/ns/depth/image_raw', '/ns/image_raw' and '/ns/image_raw/compressed' were cameras
+    with images but no CameraInfo."""
+    from fusiontrack.fusion.traffic_sensors import traffic_branches
+
+    path = _images(tmp_path / "r", {"/ns/image_raw": "raw", "/ns/image_raw/compressed": "png",
+                                    "/ns/camera_info": "info", "/ns/depth/image_raw": "raw",
+                                    "/other/image_raw": "raw"})
+    from fusiontrack.errors import RecordingError
+
+    with caplog.at_level("WARNING", logger="fusiontrack"), Recording(path) as rec, \
+            pytest.raises(RecordingError, match="'/ns/camera_info' has no CameraInfo or no pose"):  # (no /tf_static)
+        traffic_branches(rec, np.array([[0.0, 0.0, 10.0, 0.0, 7.0]]))
+    (msg,) = [r.getMessage() for r in caplog.records if "have images but no CameraInfo" in r.getMessage()]
+    assert "['/other/image_raw']" in msg  # the one camera without a CameraInfo, and only it
+
+
+def test_a_camera_whose_namespace_says_depth_is_still_a_colour_camera(tmp_path: Path) -> None:
+    """Depth images are told by their own name or their depth namespace, not by the camera's name (a first version
+    of the shared lookup dropped /depth_cam/image and /stereo_depth_camera/rgb/image_raw as depth)."""
+    path = _images(tmp_path / "r", {"/stereo_depth_camera/rgb/image_raw": "raw",
+                                    "/stereo_depth_camera/rgb/camera_info": "info",
+                                    "/stereo_depth_camera/depth/image_raw": "raw",
+                                    "/stereo_depth_camera/depth/image_raw/compressed": "png",
+                                    "/stereo_depth_camera/aligned_depth_to_color/image_raw": "raw",
+                                    "/depth_cam/image": "raw", "/depth_cam/labels": "raw", "/depth_cam/depth": "raw"})
+    with Recording(path) as rec:
+        assert rec.image_topics() == ["/depth_cam/image", "/stereo_depth_camera/rgb/image_raw"]
+        assert rec.image_topic(camera="/stereo_depth_camera/rgb/camera_info") == "/stereo_depth_camera/rgb/image_raw"

@@ -230,6 +230,8 @@ def test_generic_units_are_checked_where_they_show(tmp_path: Path) -> None:
     with pytest.raises(RecordingError, match=r"t_s: the samples are 10 s apart \(median\), 0\.1 Hz, too slow for an "
                                              r"IMU; are the times milliseconds \(name the column t_ms\)"):
         read_imu_csv(write("t_s,ax,ay,az,gx,gy,gz", t_scale=1e3))
+    with pytest.raises(RecordingError, match=r"t_ms: .*microseconds \(multiply them by 1000 and name the column t_ns"):
+        read_imu_csv(write("t_ms,ax,ay,az,gx,gy,gz", t_scale=1e6))
     # milliseconds since 1970 under t_s, accelerations in g, a gyroscope in deg/s: each named, with the remedy
     rows = [(1.7e9 + t, *rest) for t, *rest in rows]
     with pytest.raises(RecordingError, match=r"t_s reaches 1\.7e\+12, which is milliseconds .*name the column t_ms"):

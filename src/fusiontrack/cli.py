@@ -897,7 +897,12 @@ def events(
     if (geometry is None) == (world is None):
         raise ConfigError("events: give the road as --geometry FILE.toml or --world world.json (exactly one)")
     if output is not None:
-        _out_file(output, "events.jsonl", reads=[*_track_files(tracks), geometry, world, rules])
+        truth_files = [truth]
+        if truth is not None and truth.is_dir():  # a run folder: the files read in it
+            truth_files = [truth / sub / name for sub in ("ground_truth", ".") for name in ("incidents.jsonl",
+                                                                                            "agents.csv")]
+        world_file = world / "ground_truth" / "world.json" if world is not None and world.is_dir() else world
+        _out_file(output, "events.jsonl", reads=[*_track_files(tracks), geometry, world_file, rules, *truth_files])
     if geometry is not None:
         geo = load_road_geometry(geometry)
     else:
@@ -982,9 +987,9 @@ def _tracks_file(path: Path) -> Path:
 
 
 def _track_files(path: Path) -> list[Path]:
-    """The tracks file ``path`` names, or both tracks files of a `fusiontrack track` folder (outputs must not
+    """The tracks file ``path`` names, or the tracks files of a `fusiontrack track` folder (outputs must not
     overwrite them)."""
-    return [path / "tracks.jsonl", path / "tracks.csv"] if path.is_dir() else [path]
+    return [path / "tracks.jsonl", path / "tracks.csv", path / "tracks_mot.txt"] if path.is_dir() else [path]
 
 
 def _read_tracks(path: Path) -> tuple[list[Any], list[Any]]:

@@ -23,7 +23,6 @@ log = logging.getLogger(__name__)
 __all__ = ["traffic_branches"]
 
 _LASER = "sensor_msgs/msg/LaserScan"
-_IMAGES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 
 
 def traffic_branches(rec: Any, roads: Any, *, laser_params: Mapping[str, Any] | None = None,
@@ -67,8 +66,10 @@ def traffic_branches(rec: Any, roads: Any, *, laser_params: Mapping[str, Any] | 
     laser_topics = {rec.sensor_of(t): t for t, i in topics.items()
                     if i == _LASER and (chosen is None or t in chosen)}
     with_info = camera_names(rec)  # cameras the recording can pose itself (CameraInfo + tf)
-    with_images = sorted({rec.sensor_of(t) for t, i in topics.items() if i in _IMAGES
-                          and not t.endswith(("/labels", "/depth"))})
+    # cameras with colour images but none of those (Recording.image_topics: not labels or depth, one per image_transport
+    # stream; another tool's /ns/image_raw is the camera /ns/camera_info's)
+    owned = {rec.image_topic(camera=c, required=False) for c in with_info}
+    with_images = sorted({rec.sensor_of(t) for t in rec.image_topics() if t not in owned} - set(with_info))
     cameras = sorted(set(with_info) | set(with_images))
     calib = calibration or RoadCalibration()
     for kind, named, have in (("laser", calib.lasers, laser_topics), ("camera", calib.cameras, cameras)):

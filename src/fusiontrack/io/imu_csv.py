@@ -380,7 +380,8 @@ def _read_generic(path: Path, sensor: str, frame_id: str) -> ImuCsv:
     table, t_ns = _keep(table, keep), t_ns[keep]
     step_s = float(np.median(np.diff(t_ns))) / 1e9 if t_ns.size >= 2 else 0.0
     if step_s > _MAX_SAMPLE_STEP_S:  # a phone's IMU samples at 10-500 Hz: a wrong unit, not a slow sensor
-        finer = {"t_s": "milliseconds (name the column t_ms)", "t_ms": "microseconds (in ns: name it t_ns)",
+        finer = {"t_s": "milliseconds (name the column t_ms)",
+                 "t_ms": "microseconds (multiply them by 1000 and name the column t_ns)",
                  "t_ns": "not nanoseconds"}[name]
         raise RecordingError(f"{path}: {name}: the samples are {step_s:.4g} s apart (median), "
                              f"{1 / step_s:.3g} Hz, too slow for an IMU; are the times {finer}?")

@@ -90,10 +90,22 @@ def _whole_bag(path: Path) -> Path:
     return path
 
 
+_DEPTH_NAMESPACE = re.compile(r"(aligned_)?depth(_\w+)?")
+_TRANSPORTS = ("compressed", "theora", "zstd", "ffmpeg", "h264", "jpeg", "png")
+
+
 def _colour_image(topic: str) -> bool:
-    """An image topic's name is not that of a label or depth image (the simulator's ``/<camera>/labels`` and
-    ``/<camera>/depth``, ROS drivers' ``/ns/depth/image_raw``, ``/ns/depth_registered/image``)."""
-    return not topic.endswith("/labels") and not any("depth" in part for part in topic.split("/"))
+    """An image topic's name is not that of a label or depth image: the simulator's ``/<camera>/labels`` and
+    ``/<camera>/depth``, an image named for depth (``.../image_depth``, ``.../compressedDepth``), or an image in a
+    camera's depth namespace (``/ns/depth/image_raw``, ``/ns/depth_registered/image``,
+    ``/ns/aligned_depth_to_color/image_raw``). A camera's own namespace may say depth (``/depth_cam/image``,
+    ``/stereo_depth_camera/rgb/image_raw``): its colour images are colour images."""
+    parts = [q for q in topic.split("/") if q]
+    if len(parts) >= 2 and parts[-1] in _TRANSPORTS:  # image_transport's copy of a stream: as the stream
+        parts = parts[:-1]
+    if not parts or parts[-1] == "labels" or "depth" in parts[-1].lower():
+        return False
+    return not (len(parts) >= 3 and _DEPTH_NAMESPACE.fullmatch(parts[-2].lower()))
 
 
 _TUPLE_OF_TEXTS = re.compile(r"""\((?:'[^'\\]*'|"[^"\\]*")(?:,\s*(?:'[^'\\]*'|"[^"\\]*"))*,?\)""")

@@ -40,8 +40,7 @@ The step follows ARCHITECTURE.md's "Tracker step" (ALGORITHMS.md sections in bra
    of the covered area or ``n_confirm_interior`` inside it; so do the detections an unmerged target found alone
    beside its nearest one and nobody took (B7 rule 2's split candidates; also when its nearest is shared with
    another target: a third person walking beside a correlated pair was never born, 72 simulated runs of
-   ``crowd`` lost 1.1 points of MOTA to it), though a lost target may not re-acquire those; a target with no
-   detection coasts, and ends
+   ``crowd`` lost 1.1 points of MOTA to it); a target with no detection coasts, and ends
    after ``n_miss_edge`` frames on the edge (once it is ``edge_min_age_s`` old, and with ``edge_leave_s`` only
    if it is heading out) or ``n_miss`` frames elsewhere [B7]. Standing people switch to the random-walk model
    (B8, :func:`update_standing`) from the speed of the estimated body position.
@@ -1254,26 +1253,14 @@ class LaserPeopleTracker:
                 pairs, _, _ = hungarian(cost, gate=p.gate)
                 assigned[rows[pairs[:, 0]]] = pairs[:, 1]
         claimed = r > 0  # found by a target: no birth, unless B7 rule 2 makes it a split candidate
-        beside = _NO_INDEX
         if n_d:
-            cands = sf.split_candidates
-            if cands.size and 2 in r:
-                # candidates in the gate of a target that shares another detection (B7 rule 2's completion: a
-                # person beside a correlated pair) may be born, but are not free for a lost target to re-acquire:
-                # they lie in a live target's gate
-                sharing = np.logical_or.reduce(found[:, r == 2], axis=1)
-                beside = cands[np.logical_or.reduce(found[sharing][:, cands], axis=0)]
-            claimed[cands] = False
+            claimed[sf.split_candidates] = False
             claimed[assigned[assigned >= 0]] = True
 
         # ---- walking targets that found nothing may re-acquire an unclaimed detection nearby
         lost = (c[:n_w] == 0).nonzero()[0]
-        if lost.size and n_d:
-            held = claimed[beside]
-            claimed[beside] = True
-            if not _all(claimed) and self._reacquire(lost, cw, det, claimed, assigned, t_ns):
-                mid = None if _jit.ENABLED else self._feet_sums()  # some targets restarted: new particles
-            claimed[beside] = held
+        if lost.size and n_d and not _all(claimed) and self._reacquire(lost, cw, det, claimed, assigned, t_ns):
+            mid = None if _jit.ENABLED else self._feet_sums()  # some targets restarted: new particles
 
         # ---- walking targets: B9 likelihood with the assigned detection, resample (X1, B10)
         aw = assigned[:n_w]
