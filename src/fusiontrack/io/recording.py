@@ -229,13 +229,14 @@ class Recording:
     ) -> None:
         if isinstance(paths, str | Path):
             paths = [paths]
-        self.paths = [_whole_bag(Path(p)) for p in paths]
-        if not self.paths:
+        given = [Path(p) for p in paths]
+        if not given:
             raise RecordingError("no recording given: expected at least one bag, MCAP or db3 path")
-        missing = [str(p) for p in self.paths if not p.exists()]
+        missing = [str(p) for p in given if not p.exists()]
         if missing:
             raise RecordingError(f"recording not found: {', '.join(missing)}")
-        _check_distinct(self.paths)
+        _check_distinct(given)  # (as given: a folder and its .mcap are named as the user gave them)
+        self.paths = [_whole_bag(p) for p in given]
         self._custom_fields = parse_definitions(custom_types or {})
         default_typestore = build_typestore(custom_types)
         self._readers: list[AnyReader] = []
