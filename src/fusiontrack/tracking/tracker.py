@@ -242,8 +242,8 @@ class TrackerParams:
         **Very dense crowds: switch it on.** In ``benchmarks/laser_people.py``'s scaling hall (crowd, 20 s),
         MOTA with 72 people present, seed 0 / 1: 0.531 / 0.522 -> 0.646 / 0.631 (our CV Kalman: 0.688 / 0.713;
         ``n_merge`` 3 instead: 0.617 on seed 0); with 35: 0.903 / 0.881 -> 0.907 / 0.893; with 17 (seed 0): the same.
-        Since a person beside a correlated pair can be born (B7 rule 2's completion): 72 present 0.458 / 0.554 ->
-        0.641 / 0.665, 35 present 0.877 / 0.885 -> 0.905 / 0.886, 17 present 0.920 / 0.940 -> 0.946 / 0.940 (the
+        Since a person beside a correlated pair can be born (B7 rule 2's completion): 72 present 0.502 / 0.559 ->
+        0.644 / 0.666, 35 present 0.877 / 0.874 -> 0.905 / 0.880, 17 present 0.920 / 0.940 -> 0.946 / 0.940 (the
         same code before that change, rerun on these recordings: 0.533 / 0.524 at 72, 0.877 / 0.863 at 35).
         Off by default: where people walk in groups of three, or one hides behind a pair, their merges are real.
         On the fusion benchmark's 72 runs (crowd + groups, seeds 0-35, 30 s, laser only) with the particle
