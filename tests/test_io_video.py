@@ -188,6 +188,34 @@ def test_write_errors(tmp_path: Path) -> None:
         write_video(tmp_path / "fps.avi", _frames(1), fps=-1)
 
 
+@pytest.mark.parametrize("stop", [KeyboardInterrupt, RuntimeError])
+def test_a_write_stopped_part_way_keeps_the_earlier_video_and_leaves_no_partial_file(tmp_path: Path,
+                                                                                     stop: type) -> None:
+    path = tmp_path / "tracks.mp4"
+    assert write_video(path, _frames(4), fps=10) == 4
+    before = path.read_bytes()
+
+    def frames_then_stop() -> Iterator[np.ndarray]:
+        yield from _frames(6)
+        raise stop("stopped")
+
+    with pytest.raises(stop):
+        write_video(path, frames_then_stop(), fps=10)
+    assert path.read_bytes() == before  # the earlier run's video, whole
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tracks.mp4"]
+    with VideoReader(path) as video:
+        assert video.frame_count == 4
+    # a bad frame part way, and a first write that stops: nothing at all is left
+    with pytest.raises(ConfigError):
+        write_video(tmp_path / "new.avi", [_frames(1)[0], np.zeros((10, 10, 3), np.uint8)], fps=10)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tracks.mp4"]
+    # and a complete write replaces the earlier video
+    assert write_video(path, _frames(7), fps=10) == 7
+    with VideoReader(path) as video:
+        assert video.frame_count == 7
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tracks.mp4"]
+
+
 def _never_read() -> Iterator[np.ndarray]:
     raise AssertionError("write_video read a frame before checking its output path")
     yield np.zeros((1, 1, 3), np.uint8)

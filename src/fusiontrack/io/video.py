@@ -359,7 +359,9 @@ def write_video(
         Output file; its folder must exist. The suffix picks the codec unless ``fourcc`` is given:
         ``.mp4``/``.m4v``/``.mov`` -> ``mp4v`` (MPEG-4 Part 2, which browsers do not play),
         ``.avi``/``.mkv`` -> ``MJPG``, ``.webm`` -> ``VP80`` (VP8, which browsers play; several times
-        slower to encode). Other suffixes are refused unless ``fourcc`` is given.
+        slower to encode). Other suffixes are refused unless ``fourcc`` is given. The video is written beside
+        it under a hidden name and renamed onto it once complete: a write stopped part way (an error, Ctrl-C)
+        leaves ``path`` as it was, e.g. an earlier run's video, and no partial file.
     frames_bgr : iterable of (H, W, 3) uint8 BGR arrays, (H, W) uint8 grey arrays or Image records
         All of the size of the first frame.
     fps : float
@@ -385,9 +387,14 @@ def write_video(
     if not (np.isfinite(fps) and fps > 0):
         raise ConfigError(f"fps: expected a positive frame rate, got {fps!r}")
     code = check_video_output(path, fourcc)
+    # written beside ``path`` under a hidden name (same suffix: OpenCV picks the container by it) and renamed onto
+    # it at the end: a run stopped part way (an error, Ctrl-C) leaves neither a truncated video nor a loss of the
+    # one an earlier run wrote there
+    partial = path.with_name(f".{path.stem}.{os.getpid()}.partial{path.suffix}")
     writer: cv2.VideoWriter | None = None
     size: tuple[int, int] | None = None
     n = 0
+    done = False
     try:
         for frame in frames_bgr:
             pixels = frame.bgr() if isinstance(frame, Image) else np.asarray(frame)
@@ -400,7 +407,7 @@ def write_video(
             if writer is None:
                 size = (int(pixels.shape[1]), int(pixels.shape[0]))
                 with _native_stderr_off() if code.upper() == "VP80" else contextlib.nullcontext():
-                    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*code), float(fps), size)
+                    writer = cv2.VideoWriter(str(partial), cv2.VideoWriter_fourcc(*code), float(fps), size)
                 if not writer.isOpened():
                     hint = "another fourcc" if fourcc is not None else "another suffix, e.g. .avi or .mp4"
                     raise RecordingError(f"{path}: OpenCV cannot write a video with codec {code!r} "
@@ -410,10 +417,16 @@ def write_video(
                                   f"{size[0]}x{size[1]} like the first frame")
             writer.write(np.ascontiguousarray(pixels))
             n += 1
+        if n == 0:
+            raise ConfigError("frames_bgr: no frames to write")
+        writer.release()  # (n > 0: the writer was opened) the container is complete only once released
+        writer = None
+        os.replace(partial, path)
+        done = True
     finally:
         if writer is not None:
             writer.release()
-    if n == 0:
-        raise ConfigError("frames_bgr: no frames to write")
+        if not done:
+            partial.unlink(missing_ok=True)
     logger.debug("%s: wrote %d frames at %g fps (%s)", path, n, fps, code)
     return n
