@@ -264,14 +264,12 @@ def test_identity_check_undoes_an_exchange_the_laser_made_at_a_split(pair, monke
     # updated again; by default (2) such classifiers may keep identities but not exchange them, because on the
     # simulated crowds their exchanges were mostly wrong (FusionParams.check_min_updates). Here the exchange is right.
     params = FusionParams(split_identity=False, check_min_updates=1)
-    # Backgrounds learnt online, as when this test was written: primed, the tracks start 2 s earlier, the particle
-    # filters draw another random stream, and on this side-by-side pair the classifiers then come out weaker (mean
-    # evidence under check_margin from 5 s on: the check never decides). A known fragility of the identity check
-    # (evidence accumulated over many images, weak classifiers), not hidden here: see issue 6's note. Likewise
-    # A8's n_min = 2 (legs one beam hits dropped), as when it was written: with the default 1 the laser's tracks
-    # and splits differ and the check's mean evidence stays under check_margin.
+    # With the default backgrounds (primed) and detector, the classifiers of this side-by-side pair are weak: their
+    # evidence before the pair's last close pass once outvoted the exchange for good (the check never decided); it
+    # counts from the closest approach on now. (Until then this test learnt the backgrounds online and dropped legs
+    # one beam hits, n_min = 2, to get stronger classifiers.)
     states, events, stats = track_fused(pair["path"], params=params, tracker_params=SIM_PF, adaptive_bias=False,
-                                        background="learn", detector_params={"min_cluster_points": 2}, **pair["kw"])
+                                        **pair["kw"])
     assert injected
     assert stats.exchanges >= 1
     exchanged = [e for e in events if e.kind == "identity"]
