@@ -282,6 +282,18 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         (["events", "{tracks}", "--world", "{a_dir}", "--truth", "{tmp}", "-o", "{tmp}/incidents.jsonl"],
          "is the input"),  # (a run folder's file read by --truth)
         (["eval", "{tmp}", "{mot}", "-o", "{tmp}/tracks_mot.txt"], "is the input"),  # (a people-camera folder's)
+        (["eval", "{tracks}", "{rec}", "-o", "{rec}/metadata.yaml"], "is a file of the recording"),  # (the truth's)
+        (["calibrate", "camera_0", "-c", "{hall}", "--adaptive", "{rec}", "--history", "{hall}"],
+         "hall.toml: is the input"),  # (the pipeline file it rewrites: it became the history CSV)
+        (["calibrate", "camera_0", "-c", "{hall}", "--adaptive", "{rec}", "--history", "{rec}/metadata.yaml"],
+         "is a file of the recording"),
+        # calibrate's options of the other way: refused, not ignored
+        (["calibrate", "camera_0", "-c", "{hall}", "--points", "{two_points}", "--rho", "0.5", "--history", "h.csv"],
+         "--rho, --history: only with --adaptive"),
+        (["calibrate", "camera_0", "-c", "{hall}", "--adaptive", "{rec}", "--ransac", "--reference", "laser_0"],
+         "--ransac, --reference: only with --points"),
+        (["calibrate", "camera_0", "-c", "{hall}", "--points", "{two_points}", "--intrinsics", "500,500,320,240",
+          "--recording", "{rec}"], "--intrinsics and --recording both give the camera's intrinsics: give one"),
         # eval's own options
         (["eval", "{binary}", "{demo}"], "binary.png: not a UTF-8 text file (expected JSON lines"),
         (["eval", "{tracks}", "{demo}", "--time", "lgo"], "--time: expected 'header' or 'log', got 'lgo'"),
@@ -329,6 +341,8 @@ def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args
     (tmp_path / "a_file").write_text("")
     (tmp_path / "binary.png").write_bytes(bytes(range(128, 256)) * 8)
     (tmp_path / "a_dir").mkdir()
+    (tmp_path / "rec").mkdir()  # a recording folder (what an output must not overwrite in it: checked first)
+    (tmp_path / "rec" / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
     (tmp_path / "hall.toml").write_text('[sensors.camera_0]\nkind = "camera"\ntopic = "/camera_0/image"\n'
                                         'pose = { x = 0.0, y = 0.0, z = 3.0, yaw_deg = 0.0 }\n')
     (tmp_path / "two_points.csv").write_text("x_m,y_m,z_m,u_px,v_px\n0,0,0,100,400\n1,0,0,200,400\n")
@@ -343,6 +357,7 @@ def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args
              "hall": str(tmp_path / "hall.toml"), "two_points": str(tmp_path / "two_points.csv"),
              "mot": str(tmp_path / "det.txt"), "binary": str(tmp_path / "binary.png"),
              "video": str(shared_data / "video/pets09_s2l1/vtest_pets09_s2l1_480x360.avi"), "tmp": str(tmp_path),
+             "rec": str(tmp_path / "rec"),
              **{name: str(tmp_path / f"{name}.toml") for name in tables}}
     result = _cli(*[a.format(**subst) for a in args])
     assert result.returncode == 2

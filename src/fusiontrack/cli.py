@@ -251,16 +251,25 @@ def _out_folder(path: Path, option: str = "--output") -> Path:
     return path
 
 
-def _out_file(path: Path, example: str, reads: Iterable[Path | None] = ()) -> Path:
-    """``--output`` that names a file: refused, naming it, when it is an existing folder, lies under a file, or is
-    one of the files the command ``reads`` (it would be overwritten: the input lost)."""
+RECORDING_FILES = (".mcap", ".db3", ".bag", ".yaml")
+"""Suffixes of the files of a recording folder (its storage files and metadata.yaml): none is an output's."""
+
+
+def _out_file(path: Path, example: str, reads: Iterable[Path | None] = (), option: str = "--output") -> Path:
+    """An option (``--output``) that names a file to write: refused, naming it, when it is an existing folder, lies
+    under a file, is one of the files the command ``reads``, or is a file of a recording folder it reads (its
+    ``metadata.yaml`` or storage files): overwritten, the input would be lost."""
     if path.is_dir():
-        raise ConfigError(f"--output {path}: is a folder; give a file name (e.g. {path / example})")
-    _no_folder_under_a_file(path, "--output")
+        raise ConfigError(f"{option} {path}: is a folder; give a file name (e.g. {path / example})")
+    _no_folder_under_a_file(path, option)
     if path.exists():
         for r in reads:
-            if r is not None and r.exists() and path.resolve() == r.resolve():
-                raise ConfigError(f"--output {path}: is the input {r} this command reads; writing it would lose it "
+            if r is None or not r.exists():
+                continue
+            inside = r.is_dir() and path.suffix.lower() in RECORDING_FILES and r.resolve() in path.resolve().parents
+            if path.resolve() == r.resolve() or inside:
+                what = f"the input {r}" if not inside else f"a file of the recording {r}"
+                raise ConfigError(f"{option} {path}: is {what} this command reads; writing it would lose it "
                                   f"(give another file, e.g. {path.with_name(example)})")
     return path
 
@@ -1379,8 +1388,19 @@ def calibrate(
 
     if (points is None) == (adaptive is None):
         raise ConfigError("calibrate: give exactly one of --points CSV or --adaptive RECORDING")
+    # the options of the other way are refused, not ignored (a user giving them expects them to act)
+    given = {"--rho": rho != 0.1, "--history": history is not None, "--intrinsics": intrinsics is not None,
+             "--recording": recording is not None, "--ransac": ransac, "--reference": reference != "world"}
+    other = ("--rho", "--history") if points is not None else ("--intrinsics", "--recording", "--ransac", "--reference")
+    if unused := [o for o in other if given[o]]:
+        raise ConfigError(f"{', '.join(unused)}: only with {'--adaptive' if points is not None else '--points'} "
+                          f"(this run calibrates {'from --points' if points is not None else 'by --adaptive'})")
+    if intrinsics is not None and recording is not None:
+        raise ConfigError("--intrinsics and --recording both give the camera's intrinsics: give one")
     if not 0.0 < rho <= 1.0:  # (NaN too)
         raise ConfigError(f"--rho: expected a learning rate in (0, 1], got {rho}")
+    if history is not None:  # checked before the pipeline file is rewritten: it must not be an input either
+        _out_file(history, "bias.csv", reads=[config, adaptive], option="--history")
     if points is not None:
         intr = _parse_intrinsics(intrinsics) if intrinsics is not None else None
         from .errors import CalibrationError
@@ -1405,6 +1425,7 @@ def calibrate(
         run = report.bias
         console.print(f"horizontal bias {np.degrees(run.bias_rad):+.3f} deg after {len(run.history)} updates")
         if history is not None:
+            history.parent.mkdir(parents=True, exist_ok=True)
             write_bias_history(history, run.history)
             console.print(f"bias history: {history}")
     before, after = report.previous, report.pose
