@@ -96,6 +96,57 @@ def test_results_in_frames_the_truth_lacks_are_warned_of(shared_data: Path, tmp_
     assert "of its boxes are in frames" not in caplog.text
 
 
+def test_ground_truth_whose_consider_flags_drop_boxes_is_said(shared_data: Path, tmp_path: Path, caplog) -> None:
+    """Column 7 of ground truth is the consider flag, read as an integer (TrackEval): fractions there (a detection
+    file's confidences given as the truth) drop their boxes. All dropped: an error naming the file (it scored GT 0,
+    MOTA 0 without a word); some: a warning with their number, and the scores are those of the file without them."""
+    root = shared_data / "mot_reference" / "motmetrics_tud" / "TUD-Campus"
+    rows = [r.split(",") for r in (root / "gt.txt").read_text().split()]
+    assert len(rows) > 100
+    fractions = tmp_path / "fractions.txt"
+    fractions.write_text("".join(",".join([*r[:6], "0.9", *r[7:]]) + "\n" for r in rows))
+    with pytest.raises(EvaluationError, match=r"fractions.txt: column 7 of the ground truth .* drops every one of "
+                                              rf"its {len(rows)} boxes \(its values are fractions"):
+        evaluate_mot_files(fractions, root / "test.txt")
+    some = tmp_path / "some.txt"
+    some.write_text("".join(",".join([*r[:6], "0.5" if k % 3 == 0 else r[6], *r[7:]]) + "\n"
+                            for k, r in enumerate(rows)))
+    without = tmp_path / "without.txt"
+    without.write_text("".join(",".join(r) + "\n" for k, r in enumerate(rows) if k % 3))
+    with caplog.at_level("WARNING"):
+        m = evaluate_mot_files(some, root / "test.txt")
+    n_dropped = len(range(0, len(rows), 3))
+    assert f"some.txt: {n_dropped} of the ground truth's {len(rows)} boxes have a fraction" in caplog.text
+    assert m.to_dict() == evaluate_mot_files(without, root / "test.txt").to_dict()
+
+
+def test_an_empty_result_file_misses_every_truth_box(shared_data: Path, tmp_path: Path) -> None:
+    """A tracker that found nobody writes an empty file: scored (TrackEval does), every truth box a miss."""
+    root = shared_data / "mot_reference" / "motmetrics_tud" / "TUD-Campus"
+    empty = tmp_path / "empty.txt"
+    empty.write_text("")
+    m = evaluate_mot_files(root / "gt.txt", empty)
+    n_gt = len(read_mot(root / "gt.txt"))
+    assert (m.tp, m.fp, m.fn, m.id_switches) == (0, 0, n_gt, 0)
+    assert m.mota == 0.0
+    assert m.idf1 == 0.0
+    with pytest.raises(Exception, match="no data rows"):  # as ground truth, an empty file is an error
+        evaluate_mot_files(empty, root / "test.txt")
+
+
+def test_a_result_frame_past_the_sequence_names_the_file_and_its_length(shared_data: Path, tmp_path: Path) -> None:
+    seq = shared_data / "mot_reference/trackeval_mot17/gt/mot_challenge/MOT17-train/MOT17-05-FRCNN"
+    res = shared_data / "mot_reference/trackeval_mot17/trackers/mot_challenge/MOT17-train/MPNTrack/data" / \
+        "MOT17-05-FRCNN.txt"
+    length = int(next(ln for ln in (seq / "seqinfo.ini").read_text().splitlines() if ln.startswith("seqLength"))
+                 .split("=")[1])
+    late = tmp_path / "late.txt"
+    late.write_text(res.read_text() + f"{length + 1},999,10,10,20,40,1,-1,-1,-1\n")
+    with pytest.raises(EvaluationError, match=rf"late.txt: frame {length + 1} is past the sequence's last, {length} "
+                                              r"\(seqLength of the seqinfo.ini beside .*gt.txt\)"):
+        evaluate_mot_files(seq / "gt" / "gt.txt", late)
+
+
 def _pct(x: float) -> float:
     """A fraction as the devkit prints it: percent with one decimal."""
     return round(100 * x, 1)

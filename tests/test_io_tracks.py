@@ -356,3 +356,19 @@ def test_a_binary_file_is_named_as_not_text(tmp_path: Path, name: str) -> None:
     reader = read_ground_truth_csv if name == "gt.csv" else read_tracks_csv if name.endswith(".csv") else read_jsonl
     with pytest.raises(RecordingError, match=rf"{name}: not a UTF-8 text file \(expected "):
         reader(p)
+
+
+def test_a_csv_with_both_t_and_t_ns_is_read_by_t_ns_as_tracks_and_as_truth(tmp_path: Path) -> None:
+    """The simulator's agents.csv has both: ``t`` seconds from the start, ``t_ns`` the clock. Read as tracks it was
+    read by ``t`` (1.7e9 s before the truth, everything missed), as truth by ``t_ns``: one file, two clocks."""
+    t0 = 1_700_000_000_000_000_000
+    path = tmp_path / "agents.csv"
+    path.write_text("t,t_ns,id,x,y\n" + "".join(f"{k * 0.1:.1f},{t0 + k * 100_000_000},{i},{i + 0.5 * k},0\n"
+                                                 for k in range(3) for i in (1, 2)))
+    tracks = read_tracks_csv(path)
+    truth = read_ground_truth_csv(path)
+    assert sorted({s.t_ns for s in tracks}) == [g.t_ns for g in truth] == [t0 + k * 100_000_000 for k in range(3)]
+    for g in truth:
+        for i, xy in zip(g.ids, g.positions_m, strict=True):
+            (s,) = [s for s in tracks if s.t_ns == g.t_ns and s.track_id == i]
+            np.testing.assert_array_equal(s.position_m, xy)

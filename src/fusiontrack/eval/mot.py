@@ -759,7 +759,7 @@ def _box_sequence(gt: MotBoxes, res: MotBoxes, preprocess: bool, distractor_clas
 
 def evaluate_boxes(gt: MotBoxes, res: MotBoxes, *, preprocess: bool | None = None, iou_threshold: float = 0.5,
                    n_frames: int | None = None, distractor_classes: Sequence[int] = MOT16_DISTRACTOR_CLASSES,
-                   name: str = "boxes") -> Metrics:
+                   name: str = "boxes", gt_name: str | None = None) -> Metrics:
     """Metrics of image boxes (MOTChallenge rows) with IoU similarity.
 
     Parameters
@@ -780,12 +780,15 @@ def evaluate_boxes(gt: MotBoxes, res: MotBoxes, *, preprocess: bool | None = Non
         (:data:`MOT20_DISTRACTOR_CLASSES` for MOT20).
     name : str
         Sequence name used in error messages.
+    gt_name : str, optional
+        The ground truth's name in its messages (default ``name``).
 
     Raises
     ------
     EvaluationError
-        A frame outside ``1 .. n_frames``, an id twice in one frame, a bad threshold, or ``preprocess``
-        asked of ground truth without a class column.
+        A frame outside ``1 .. n_frames``, an id twice in one frame, a bad threshold, ``preprocess``
+        asked of ground truth without a class column, or ground truth whose column 7 (the consider flag) drops
+        every box.
     """
     if not (isinstance(iou_threshold, int | float | np.floating) and 0 < iou_threshold <= 1):
         raise EvaluationError(f"iou_threshold: expected a value in (0, 1], got {iou_threshold!r}")
@@ -803,8 +806,29 @@ def evaluate_boxes(gt: MotBoxes, res: MotBoxes, *, preprocess: bool | None = Non
     first = int(min(gt.frame.min(initial=1), res.frame.min(initial=1)))
     if first < 1:
         raise EvaluationError(f"{name}: frames are 1-based, found frame {first}")
+    _check_consider_flags(gt, name if gt_name is None else gt_name)
     seq = _box_sequence(gt, res, bool(preprocess), distractor_classes, int(n_frames), name)
     return _evaluate(seq, float(iou_threshold))
+
+
+def _check_consider_flags(gt: MotBoxes, name: str) -> None:
+    """Column 7 of ground truth is the *consider* flag, read as an integer (as TrackEval does): 0 drops the box.
+    Ground truth in which it drops every box scores nothing (an error); one whose flags are fractions, such as a
+    detection file's confidences, loses those in (-1, 1) (a warning naming how many)."""
+    if not len(gt):
+        return
+    flag = gt.conf.astype(np.int64)
+    if not np.any(flag != 0):
+        frac = np.any(gt.conf != np.round(gt.conf))
+        raise EvaluationError(f"{name}: column 7 of the ground truth (the consider flag, an integer: 0 = not "
+                              f"scored) drops every one of its {len(gt)} boxes"
+                              + (" (its values are fractions, like a detection file's confidences: is it one?)"
+                                 if frac else ""))
+    lost = np.count_nonzero((flag == 0) & (gt.conf != 0))
+    if lost:
+        logger.warning("%s: %d of the ground truth's %d boxes have a fraction in (-1, 1) in column 7 (the consider "
+                       "flag, read as an integer as TrackEval does): they are dropped as 0 (not scored)", name,
+                       lost, len(gt))
 
 
 def evaluate_camera_boxes(truth: Sequence[GroundTruth], tracks: Iterable[TrackState | Track] | MotBoxes,
@@ -933,7 +957,9 @@ def evaluate_mot_files(gt_path: str | Path, res_path: str | Path, *, preprocess:
         As :func:`evaluate_boxes`, or a malformed ``seqinfo.ini``.
     """
     gt_path, res_path = Path(gt_path), Path(res_path)
-    gt, res = read_mot(gt_path), read_mot(res_path)
+    gt, res = read_mot(gt_path), read_mot(res_path, allow_empty=True)
+    if not len(res):  # (TrackEval scores an empty result too: every truth box missed)
+        logger.warning("%s: no boxes: every box of %s counts as missed", res_path, gt_path)
     if len(gt) and len(res):
         inside = np.isin(res.frame, np.unique(gt.frame)).mean()
         if inside < 0.5:  # (scored all the same: every truth box missed, every result box a false positive)
@@ -942,8 +968,13 @@ def evaluate_mot_files(gt_path: str | Path, res_path: str | Path, *, preprocess:
                         res.frame.min(), res.frame.max(), gt.frame.min(), gt.frame.max())
     if n_frames is None:
         n_frames = _seq_length(gt_path)
+        for path, boxes in ((res_path, res), (gt_path, gt)):
+            if n_frames is not None and len(boxes) and int(boxes.frame.max()) > n_frames:
+                raise EvaluationError(f"{path}: frame {int(boxes.frame.max())} is past the sequence's last, "
+                                      f"{n_frames} (seqLength of the seqinfo.ini beside {gt_path}): another "
+                                      "sequence, or frames numbered otherwise?")
     return evaluate_boxes(gt, res, preprocess=preprocess, iou_threshold=iou_threshold, n_frames=n_frames,
-                          distractor_classes=distractor_classes, name=str(res_path))
+                          distractor_classes=distractor_classes, name=str(res_path), gt_name=str(gt_path))
 
 
 # --------------------------------------------------------------------------------------------------

@@ -233,7 +233,8 @@ def read_tracks_csv(path: str | Path, sensor: str = "tracker") -> list[TrackStat
     """Read a world-frame tracks CSV back into :class:`TrackState` records, in file order.
 
     A ``tracks.csv`` of ``fusiontrack track`` (:data:`TRACKS_CSV_COLUMNS`), or another tracker's output with at
-    least ``t`` (s) or ``t_ns``, ``id``, ``x``, ``y`` (m): the other columns are optional (``vx``, ``vy`` 0;
+    least ``t`` (s) or ``t_ns`` (which wins when both are there, as for ground truth), ``id``, ``x``, ``y`` (m): the
+    other columns are optional (``vx``, ``vy`` 0;
     ``class`` person; ``situation`` noncorrelated; ``sensors`` none; ``score`` 1), names in any case, others ignored.
 
     Parameters
@@ -256,7 +257,7 @@ def read_tracks_csv(path: str | Path, sensor: str = "tracker") -> list[TrackStat
         if header is None:
             raise RecordingError(f"{path}: empty file (expected {what})")
         names = [h.strip().lower() for h in header]
-        time_col = "t" if "t" in names else "t_ns"
+        time_col = "t_ns" if "t_ns" in names else "t"  # (both: t_ns, exact; as read_ground_truth_csv does)
         missing = [c for c in (time_col, "id", "x", "y") if c not in names]
         if missing:
             raise RecordingError(f"{path}, line 1: header lacks {missing} (expected {what})")
@@ -402,16 +403,23 @@ class MotBoxes:
         return np.flatnonzero(self.frame == frame)
 
 
-def read_mot(path: str | Path) -> MotBoxes:
+def read_mot(path: str | Path, *, allow_empty: bool = False) -> MotBoxes:
     """Read a MOTChallenge text file (tracker output, ``det.txt`` or ``gt.txt``; see :class:`MotBoxes`).
+
+    ``allow_empty``: an empty file (nothing but blank lines) is no boxes, e.g. a tracker's output on a sequence
+    where it found nobody; else it is an error.
 
     Raises
     ------
     RecordingError
-        Missing file, fewer than 6 columns, a row of another length or with a non-number, or a
-        frame/id that is not a whole number (file and line named).
+        Missing file, no rows (unless ``allow_empty``), fewer than 6 columns, a row of another length or with a
+        non-number, or a frame/id that is not a whole number (file and line named).
     """
     path = Path(path)
+    if allow_empty and path.is_file() and path.stat().st_size < 1 << 16 and \
+            not path.read_bytes().decode("utf-8", "replace").strip():
+        return MotBoxes(frame=np.zeros(0, np.int64), id=np.zeros(0, np.int64), boxes_ltwh=np.zeros((0, 4)),
+                        conf=np.zeros(0), extra=np.zeros((0, 0)))
     what = "MOTChallenge rows frame,id,bb_left,bb_top,bb_width,bb_height[,conf,...]"
     table = read_numeric_table(path, what=what)
     v = table.values
