@@ -580,6 +580,23 @@ def test_a_recording_shorter_than_the_background_learning_still_tracks_its_peopl
     assert m.mota > 0.5  # (0 before: not one track)
 
 
+def test_lasers_left_out_by_the_pipeline_file_are_named(simulated, tmp_path):
+    """A pipeline file listing one of a recording's two scanners (as the README's calibrate workflow writes one, with
+    the reference laser) tracks with that one only: said, naming the scanner left out, not silently halved."""
+    path = simulated("crowd", seconds=1.5, seed=1)
+    one = tmp_path / "one.toml"
+    one.write_text('[sensors.laser_0]\nkind = "laser"\ntopic = "/laser_0/scan"\n')
+    both = tmp_path / "both.toml"
+    both.write_text(one.read_text() + '[sensors.laser_1]\nkind = "laser"\ntopic = "/laser_1/scan"\n')
+    said = "lists the laser(s) /laser_0/scan: only they are tracked; the recording's /laser_1/scan is left out"
+    result = _cli("track", str(path), "-c", str(one), "--no-video", "-o", str(tmp_path / "a"))
+    assert result.returncode == 0, result.stderr
+    assert said in " ".join(result.stderr.split())
+    result = _cli("track", str(path), "-c", str(both), "--no-video", "-o", str(tmp_path / "b"))
+    assert result.returncode == 0, result.stderr
+    assert "left out" not in result.stderr
+
+
 @pytest.mark.parametrize(("args", "option"), [
     (["track", "{demo}", "--time", "log", "--area", "none", "--no-video", "-o", "{file}/sub"], "--output"),
     (["eval", "{demo}", "{demo}", "-o", "{file}/m.json"], "--output"),

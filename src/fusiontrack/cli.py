@@ -674,6 +674,15 @@ def track(
     _check_laser_tables(cfg, config, tracker_kind)
     _check_sensor_topics(cfg, config, recordings, {"laser", "camera", "rgbd"} if pipeline == "people" else {"laser"})
     topics = [s.topic for s in cfg.sensors.values() if s.kind == "laser"] or None
+    if topics:  # the file's lasers are the ones tracked: the recording's others left out are said, not silent
+        from .io.recording import LASERSCAN, Recording
+
+        with Recording(recordings) as rec:
+            others = sorted(t for t, ty in rec.topic_types().items() if ty == LASERSCAN and t not in topics)
+        if others:
+            log.warning("%s lists the laser(s) %s: only they are tracked; the recording's %s %s left out (list "
+                        "them under [sensors] to track with them too)", config, ", ".join(topics),
+                        ", ".join(others), "is" if len(others) == 1 else "are")
     area_m: Any = {"auto": "auto", "none": None}.get(area)
     if area_m is None and area != "none":
         try:
