@@ -244,6 +244,14 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
          "topic_missing.toml: [sensors.front] topic '/nope' is not in"),
         (["track", "{demo}", "-o", "{out}", "-c", "{tracking_typo}", "--pipeline", "wearable"],
          "tracking_typo.toml: [tracking]: unknown"),
+        # ... and by the other commands that read a pipeline file (convert and calibrate ran on, silently)
+        (["convert", "{demo}", "-o", "{out}", "-c", "{tracking_typo}"], "tracking_typo.toml: [tracking]: unknown"),
+        (["convert", "{demo}", "-o", "{out}", "-c", "{topic_missing}"],
+         "topic_missing.toml: [sensors.front] topic '/nope' is not in"),
+        (["calibrate", "camera_0", "-c", "{tracking_typo}", "--adaptive", "{demo}", "--dry-run"],
+         "tracking_typo.toml: [tracking]: unknown"),
+        (["calibrate", "camera_0", "-c", "{fusion_typo}", "--points", "{two_points}", "--dry-run"],
+         "fusion_typo.toml: [fusion]: unknown key(s) check_margn"),
         # numbers that are not finite, and a negative seed: the setting named, no traceback
         # (named by the option the user typed, not the field behind it)
         (["simulate", "crowd", "-o", "{out}", "--seconds", "inf"], "--seconds: expected a duration > 0, got inf"),

@@ -122,6 +122,25 @@ def test_calibrate_from_recording_starts_from_the_recordings_poses_when_the_file
     assert math.degrees(report.bias.bias_rad) == pytest.approx(BIAS_DEG, abs=0.2)
 
 
+def test_calibrate_from_recording_finds_the_files_sensors_by_their_topics(crowd, tmp_path):
+    """A pipeline file naming its sensors otherwise than the recording (front / back / front_cam for laser_0 /
+    laser_1 / camera_0), with their topics: the same sensors are used, by topic, as the pipelines do (it failed:
+    "laser(s) ['front', 'back'] not found"), and the bias is the one learnt under the recording's names."""
+    text = _pipeline_without_poses(crowd)
+    named = tmp_path / "named.toml"
+    named.write_text(text, encoding="utf-8")
+    renamed = tmp_path / "renamed.toml"
+    renamed.write_text(text.replace("[sensors.laser_0]", "[sensors.front]").replace("[sensors.laser_1]",
+                                                                                   "[sensors.back]")
+                       .replace("[sensors.camera_0]", "[sensors.front_cam]"), encoding="utf-8")
+    assert "laser_0]" not in renamed.read_text()
+    a = calibrate_from_recording(named, "camera_0", crowd["path"], params=BiasParams(rho=0.5), write=False)
+    b = calibrate_from_recording(renamed, "front_cam", crowd["path"], params=BiasParams(rho=0.5), write=False)
+    np.testing.assert_array_equal(b.bias.history.bias_rad, a.bias.history.bias_rad)
+    np.testing.assert_array_equal(b.bias.history.n_used, a.bias.history.n_used)
+    assert math.degrees(b.bias.bias_rad) == pytest.approx(BIAS_DEG, abs=0.2)
+
+
 def test_the_people_pipeline_poses_its_camera_as_the_pipeline_file_says(crowd, tmp_path):
     """``camera_poses`` (a pipeline file's camera pose, e.g. as ``fusiontrack calibrate`` wrote it) replaces the
     recording's /tf_static pose: the camera moved 100 m aside sees nobody, so no classifier learns; posed as the

@@ -295,12 +295,19 @@ def _check_sensor_topics(cfg: Any, config: Path | None, recordings: Sequence[Pat
 
 
 def _check_laser_tables(cfg: Any, config: Path | None, tracker_kind: str) -> None:
-    """A pipeline file's [laser] and [tracking] tables checked before any reading, errors naming the file."""
+    """A pipeline file's [laser] and [tracking] tables checked before any reading, errors naming the file.
+    ``tracker_kind`` "any" (a command that tracks nothing): [tracking] must suit the pf or the kalman tracker."""
     from .laser.detector import check_detector_params
 
     where = f"{config}: " if config is not None else ""
     if cfg.laser:
         check_detector_params(cfg.laser, f"{where}[laser]")
+    if tracker_kind == "any":
+        try:
+            _check_laser_tables(cfg, config, "kalman")
+            return
+        except ConfigError:
+            tracker_kind = "pf"  # (neither: the particle filter's error, the default tracker's)
     if cfg.tracking and tracker_kind == "pf":
         from .tracking.tracker import TrackerParams
 
@@ -343,6 +350,10 @@ def convert(
         raise ConfigError(f"--time: expected 'header' or 'log', got {time_source!r}")
     _no_folder_under_a_file(output, "--output")
     cfg = _load_config(config)
+    _check_laser_tables(cfg, config, "any")  # (not used here, but a typo in the file is an error whatever the run)
+    from .config import SensorKind
+
+    _check_sensor_topics(cfg, config, recordings, {k.value for k in SensorKind})
     sync = Synchronizer(cfg.sync.window_ns, cfg.clock_corrections_ns())
     with Recording(recordings, sensors=cfg.topics()) as rec:
         rec.select(topic)  # unknown or unconvertible topics fail here, before the output exists
@@ -1410,6 +1421,10 @@ def calibrate(
         raise ConfigError(f"--rho: expected a learning rate in (0, 1], got {rho}")
     if history is not None:  # checked before the pipeline file is rewritten: it must not be an input either
         _out_file(history, "bias.csv", reads=[config, adaptive], option="--history")
+    cfg = _load_config(config)  # every table checked, as by track (a typo in one is an error whatever the run)
+    _check_laser_tables(cfg, config, "any")
+    if adaptive is not None:
+        _check_sensor_topics(cfg, config, [adaptive], {"laser", "camera"})
     if points is not None:
         intr = _parse_intrinsics(intrinsics) if intrinsics is not None else None
         from .errors import CalibrationError

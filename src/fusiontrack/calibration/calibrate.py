@@ -264,8 +264,18 @@ def calibrate_from_recording(pipeline: str | Path, camera: str, recording: str |
         laser2world = {n: cfg.sensors[n].pose.matrix() for n in (wanted or [])
                        if n in cfg.sensors and cfg.sensors[n].has_pose}
     offsets = {n: s.clock_offset_ms for n, s in cfg.sensors.items() if s.clock_offset_ms}
-    run = bias_from_recording(recording, camera, wanted, params, clock_offsets_ms=offsets, cam2world=cam2world,
-                              laser2world=laser2world)
+    # the file's sensors are found in the recording by their topics, as the pipelines find them: the names the
+    # recording gives those topics may be others (a file naming its scanners front / back)
+    from ..io.recording import Recording
+
+    with Recording(recording) as rec:
+        name = {n: rec.sensor_of(s.topic) for n, s in cfg.sensors.items()}
+    run = bias_from_recording(recording, name.get(camera, camera), [name.get(n, n) for n in wanted or []] or None,
+                              params, clock_offsets_ms={name.get(n, n): v for n, v in offsets.items()},
+                              cam2world=cam2world,
+                              laser2world=None if laser2world is None else {name.get(n, n): m
+                                                                            for n, m in laser2world.items()},
+                              image_topic=cfg.sensors[camera].topic)
     if not np.any(run.history.n_used):
         raise CalibrationError(f"{recording}: no camera object was ever matched to a laser cluster; the bias is "
                                "unknown (are people walking in view of both sensors?)")
