@@ -259,6 +259,26 @@ def test_calibration_edges_name_the_problem(scene, tmp_path):
     assert new.sensors["camera_0"].pose.z == 3.0
 
 
+def test_rewriting_a_pose_keeps_the_files_permissions_and_a_link(tmp_path):
+    """The pose is written atomically through a temporary file: the file keeps its mode (it became 0600) and a
+    pipeline file that is a symlink stays one, its target rewritten (the link was replaced by a copy)."""
+    import os
+    import stat
+
+    target = tmp_path / "shared" / "hall.toml"
+    target.parent.mkdir()
+    target.write_text(PIPELINE, encoding="utf-8")
+    os.chmod(target, 0o640)
+    link = tmp_path / "hall.toml"
+    link.symlink_to(target)
+    write_pose_to_pipeline(link, "camera_0", Pose(z=4.5))
+    assert link.is_symlink()
+    assert link.resolve() == target.resolve()
+    assert stat.S_IMODE(target.stat().st_mode) == 0o640
+    assert load_config(target).sensors["camera_0"].pose.z == 4.5
+    assert sorted(p.name for p in target.parent.iterdir()) == ["hall.toml"]  # no temporary file left
+
+
 def test_calibrate_command_line(scene, tmp_path):
     """`fusiontrack calibrate CAMERA -c PIPELINE --points CSV --intrinsics ...` rewrites the camera's pose."""
     import subprocess

@@ -137,6 +137,12 @@ def update_pipeline_pose(text: str, sensor: str, pose: Pose, *, kind: str | None
     return new_text
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def write_pose_to_pipeline(path: str | Path, sensor: str, pose: Pose, *, kind: str | None = None,
                            topic: str | None = None, comment: str = "", create: bool = False) -> PipelineConfig:
     """Rewrite the pose of ``sensor`` in the pipeline file ``path`` (atomically) and return the new configuration.
@@ -159,11 +165,16 @@ def write_pose_to_pipeline(path: str | Path, sensor: str, pose: Pose, *, kind: s
     except OSError as err:
         raise ConfigError(f"{path}: cannot read the pipeline file: {err.strerror}") from err
     new_text = update_pipeline_pose(text, sensor, pose, kind=kind, topic=topic, comment=comment, source=str(path))
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent if path.parent.exists() else None)
+    target = path.resolve() if path.is_symlink() else path  # a linked file is rewritten, the link kept
+    # the new file keeps the old one's permissions (mkstemp makes it 0600); a new file gets the umask's
+    mode = target.stat().st_mode & 0o7777 if target.exists() else 0o666 & ~_umask()
+    fd, tmp = tempfile.mkstemp(prefix=target.name + ".", suffix=".tmp",
+                               dir=target.parent if target.parent.exists() else None)
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
             f.write(new_text)
-        os.replace(tmp, path)
+        os.chmod(tmp, mode)
+        os.replace(tmp, target)
     except OSError as err:
         Path(tmp).unlink(missing_ok=True)
         raise ConfigError(f"{path}: cannot write the pipeline file: {err.strerror}") from err
