@@ -605,6 +605,22 @@ def test_lasers_left_out_by_the_pipeline_file_are_named(simulated, tmp_path):
     assert "left out" not in result.stderr
 
 
+def test_the_people_pipeline_fuses_the_camera_its_pipeline_file_names(simulated, tmp_path):
+    """A road recording has two cameras: a pipeline file naming one of them chooses it (the run asked for
+    --camera-topic as if the file said nothing); naming both, the error says to choose one."""
+    path = simulated("road", seconds=3, seed=0)
+    one = tmp_path / "one.toml"
+    one.write_text('[sensors.camera_1]\nkind = "camera"\ntopic = "/camera_1/image"\n')
+    result = _cli("track", str(path), "--pipeline", "people", "-c", str(one), "--no-video", "-o", str(tmp_path / "a"))
+    assert result.returncode == 0, result.stderr
+    assert "camera_1 horizontal bias" in result.stdout
+    both = tmp_path / "both.toml"
+    both.write_text(one.read_text() + '[sensors.camera_0]\nkind = "camera"\ntopic = "/camera_0/image"\n')
+    result = _cli("track", str(path), "--pipeline", "people", "-c", str(both), "--no-video", "-o", str(tmp_path / "b"))
+    assert result.returncode == 2
+    assert "lists several cameras (/camera_1/image, /camera_0/image)" in " ".join(result.stderr.split())
+
+
 @pytest.mark.parametrize(("args", "option"), [
     (["track", "{demo}", "--time", "log", "--area", "none", "--no-video", "-o", "{file}/sub"], "--output"),
     (["eval", "{demo}", "{demo}", "-o", "{file}/m.json"], "--output"),

@@ -710,6 +710,12 @@ def track(
 
             if tracker_kind != "pf":
                 raise ConfigError(f"--tracker: the people pipeline uses the pf tracker, got {tracker_kind!r}")
+            cameras = [s.topic for s in cfg.sensors.values() if s.kind == "camera"]
+            if camera_topic is None and len(cameras) == 1:  # the camera the pipeline file names
+                camera_topic = cameras[0]
+            elif camera_topic is None and len(cameras) > 1:
+                raise ConfigError(f"{config} lists several cameras ({', '.join(cameras)}): the people pipeline "
+                                  "fuses one; choose it with --camera-topic")
             fusion_params = FusionParams.from_mapping(cfg.fusion, f"{config}: [fusion]") if cfg.fusion else None
             states, events, fstats = track_fused(
                 recordings, params=fusion_params, tracker_params=cfg.tracking or None, camera_topic=camera_topic,
