@@ -162,6 +162,24 @@ def test_config_errors_name_the_field():
         parse_config({"sensors": {"l": {"kind": "laser", "topc": "/scan"}}})
 
 
+@pytest.mark.parametrize(("table", "field"), [
+    ({"sync": {"window_ms": True}}, r"sync\.window_ms.*True"),  # (was read as 1 ms)
+    ({"sync": {"window_ms": "200"}}, r"sync\.window_ms.*'200'"),  # (was read as 200)
+    ({"sensors": {"l": {"kind": "laser", "topic": "/s", "clock_offset_ms": "35"}}}, r"sensors\.l\.clock_offset_ms"),
+    ({"sensors": {"l": {"kind": "laser", "topic": "/s", "pose": {"yaw_deg": "90"}}}}, r"sensors\.l\.pose\.yaw_deg"),
+    ({"sensors": {"l": {"kind": "laser", "topic": "/s", "pose": {"z": False}}}}, r"sensors\.l\.pose\.z"),
+    ({"sensors": {"l": {"kind": "laser", "topic": "/s", "frame": "base_laser"}}}, r"sensors\.l\.frame"),  # (unused)
+])
+def test_config_numbers_are_numbers_and_nothing_is_accepted_unused(table, field):
+    """A TOML boolean or string where a number belongs is refused, naming the field (pydantic's lax mode read
+    true as 1 and "200" as 200); and a key nothing reads is not accepted."""
+    with pytest.raises(ConfigError, match=field):
+        parse_config(table)
+    ints = parse_config({"sync": {"window_ms": 150}, "sensors": {"l": {"kind": "laser", "topic": "/s",
+                                                                      "pose": {"x": 1, "yaw_deg": 45}}}})
+    assert (ints.sync.window_ms, ints.sensors["l"].pose.x, ints.sensors["l"].pose.yaw_deg) == (150.0, 1.0, 45.0)
+
+
 def test_a_sensor_clock_offset_beyond_a_day_is_refused_where_it_is_written():
     # 1e12 ms: the stamps passed int32 seconds and the writer raised struct.error, leaving a half-written recording
     scenario = {"lasers": [{"name": "laser_0", "x_m": 0.0, "y_m": 0.0, "rate_hz": 25.0, "clock_offset_ms": 1e12}]}

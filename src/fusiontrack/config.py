@@ -6,7 +6,7 @@ Validated once at the edge with pydantic; every error names the file and the fie
 Example::
 
     [pipeline]
-    name = "people-laser"
+    name = "hall"   # a label of the set-up; which pipeline runs is track's --pipeline
 
     [sync]
     window_ms = 200
@@ -27,12 +27,15 @@ import tomllib
 from enum import StrEnum
 from pathlib import Path
 from types import UnionType
-from typing import Any, Union, get_args, get_origin
+from typing import Annotated, Any, Union, get_args, get_origin
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError
 
 from .errors import ConfigError
+
+Number = Annotated[float, Strict()]
+"""A number of the pipeline file: an integer or a float, not ``true`` (read as 1) nor a string (``"200"``)."""
 
 
 class _Model(BaseModel):
@@ -51,12 +54,12 @@ class SensorKind(StrEnum):
 class Pose(_Model):
     """Sensor pose in the world frame: position in metres, orientation in degrees (config only)."""
 
-    x: float = 0.0
-    y: float = 0.0
-    z: float = 0.0
-    roll_deg: float = 0.0
-    pitch_deg: float = 0.0
-    yaw_deg: float = 0.0
+    x: Number = 0.0
+    y: Number = 0.0
+    z: Number = 0.0
+    roll_deg: Number = 0.0
+    pitch_deg: Number = 0.0
+    yaw_deg: Number = 0.0
 
     def matrix(self) -> np.ndarray:
         """``sensor2world`` of the sensor's body frame (x forward, z up) as a 4x4 homogeneous matrix."""
@@ -69,9 +72,8 @@ class Pose(_Model):
 class SensorConfig(_Model):
     kind: SensorKind
     topic: str = Field(min_length=1)
-    frame: str = ""
     pose: Pose = Pose()
-    clock_offset_ms: float = 0.0
+    clock_offset_ms: Number = 0.0
     """How far this sensor's clock is ahead of the common clock (its stamps = true time + offset), as in
     the simulator's scenario files; synchronisation subtracts it."""
     info_topic: str = ""
@@ -89,7 +91,7 @@ class SensorConfig(_Model):
 
 
 class SyncConfig(_Model):
-    window_ms: float = Field(200.0, ge=0.0)
+    window_ms: Number = Field(200.0, ge=0.0)
 
     @property
     def window_ns(self) -> int:
@@ -97,6 +99,9 @@ class SyncConfig(_Model):
 
 
 class PipelineHeader(_Model):
+    """``[pipeline]``: a label of the set-up and a description (for people; ``track --pipeline`` chooses what
+    runs)."""
+
     name: str = "people-laser"
     description: str = ""
 
