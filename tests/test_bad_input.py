@@ -308,16 +308,26 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         (["events", "{tracks}", "--world", "{a_dir}", "--truth", "{tmp}", "-o", "{tmp}/incidents.jsonl"],
          "is the input"),  # (a run folder's file read by --truth)
         (["eval", "{tmp}", "{mot}", "-o", "{tmp}/tracks_mot.txt"], "is the input"),  # (a people-camera folder's)
-        (["eval", "{tracks}", "{rec}", "-o", "{rec}/metadata.yaml"], "is a file of the recording"),  # (the truth's)
+        # ... nor into a recording folder it reads: the truth's metadata, storage files and simulator's files
+        (["eval", "{tracks}", "{rec}", "-o", "{rec}/metadata.yaml"], "is inside the recording"),
+        (["eval", "{tracks}", "{rec}", "-o", "{rec}/ground_truth/world.json"], "is inside the recording"),
+        (["eval", "{tracks}", "{rec}/r.mcap", "-o", "{rec}/metrics.json"], "is inside the recording"),  # (its file)
         (["calibrate", "camera_0", "-c", "{hall}", "--adaptive", "{rec}", "--history", "{hall}"],
          "hall.toml: is the input"),  # (the pipeline file it rewrites: it became the history CSV)
-        (["calibrate", "camera_0", "-c", "{hall}", "--adaptive", "{rec}", "--history", "{rec}/metadata.yaml"],
-         "is a file of the recording"),
+        (["calibrate", "camera_0", "-c", "{hall}", "--adaptive", "{rec}", "--history", "{rec}/ground_truth/a.csv"],
+         "is inside the recording"),
         # calibrate's options of the other way: refused, not ignored
         (["calibrate", "camera_0", "-c", "{hall}", "--points", "{two_points}", "--rho", "0.5", "--history", "h.csv"],
          "--rho, --history: only with --adaptive"),
         (["calibrate", "camera_0", "-c", "{hall}", "--adaptive", "{rec}", "--ransac", "--reference", "laser_0"],
          "--ransac, --reference: only with --points"),
+        (["calibrate", "camera_0", "-c", "{hall}", "--points", "{two_points}", "--rho", "0.1"],  # (the default value)
+         "--rho: only with --adaptive"),
+        (["calibrate", "camera_0", "-c", "{hall}", "--adaptive", "{rec}", "--reference", "world"],
+         "--reference: only with --points"),
+        # a [tracking] table for the Kalman tracker, wrong: the Kalman's error, not "unknown" particle-filter keys
+        (["convert", "{demo}", "-o", "{out}", "-c", "{kalman_bad}"], "kalman_bad.toml: [tracking] with --tracker "
+                                                                      "kalman: "),
         (["calibrate", "camera_0", "-c", "{hall}", "--points", "{two_points}", "--intrinsics", "500,500,320,240",
           "--recording", "{rec}"], "--intrinsics and --recording both give the camera's intrinsics: give one"),
         # eval's own options
@@ -361,7 +371,8 @@ def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args
               "tracking_pf": "[tracking]\ncap_merges = true\n", "fusion_typo": "[fusion]\ncheck_margn = 0.5\n",
               "wearable_typo": "[wearable]\nphone = 'a'\n", "traffic_workers": "[traffic]\nworkers = -3\n",
               "topic_missing": '[sensors.front]\nkind = "laser"\ntopic = "/nope"\n',
-              "offset_inf": '[sensors.l0]\nkind = "laser"\ntopic = "/scan"\nclock_offset_ms = inf\n'}
+              "offset_inf": '[sensors.l0]\nkind = "laser"\ntopic = "/scan"\nclock_offset_ms = inf\n',
+              "kalman_bad": "[tracking]\ngate_m = -1.0\n"}
     for name, text in tables.items():
         (tmp_path / f"{name}.toml").write_text(text)
     (tmp_path / "a_file").write_text("")
@@ -369,6 +380,7 @@ def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args
     (tmp_path / "a_dir").mkdir()
     (tmp_path / "rec").mkdir()  # a recording folder (what an output must not overwrite in it: checked first)
     (tmp_path / "rec" / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    (tmp_path / "rec" / "r.mcap").write_bytes(b"")
     (tmp_path / "hall.toml").write_text('[sensors.camera_0]\nkind = "camera"\ntopic = "/camera_0/image"\n'
                                         'pose = { x = 0.0, y = 0.0, z = 3.0, yaw_deg = 0.0 }\n')
     (tmp_path / "two_points.csv").write_text("x_m,y_m,z_m,u_px,v_px\n0,0,0,100,400\n1,0,0,200,400\n")

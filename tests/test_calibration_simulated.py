@@ -139,6 +139,11 @@ def test_calibrate_from_recording_finds_the_files_sensors_by_their_topics(crowd,
     np.testing.assert_array_equal(b.bias.history.bias_rad, a.bias.history.bias_rad)
     np.testing.assert_array_equal(b.bias.history.n_used, a.bias.history.n_used)
     assert math.degrees(b.bias.bias_rad) == pytest.approx(BIAS_DEG, abs=0.2)
+    rear = tmp_path / "rear.toml"  # a sensor of the file the recording lacks: named as the file names it
+    rear.write_text(renamed.read_text() + '[sensors.rear]\nkind = "laser"\ntopic = "/rear/scan"\n', encoding="utf-8")
+    with pytest.raises(RecordingError, match=r"rear.toml's \[sensors.rear\] topic '/rear/scan' is not in the "
+                                             r"recording; it has: .*/laser_0/scan"):
+        calibrate_from_recording(rear, "front_cam", crowd["path"], write=False)
 
 
 def test_the_people_pipeline_poses_its_camera_as_the_pipeline_file_says(crowd, tmp_path):

@@ -214,6 +214,15 @@ def test_a_write_stopped_part_way_keeps_the_earlier_video_and_leaves_no_partial_
     with VideoReader(path) as video:
         assert video.frame_count == 7
     assert sorted(p.name for p in tmp_path.iterdir()) == ["tracks.mp4"]
+    # through a symlink: the linked video is rewritten, the link kept (it was replaced by a file)
+    link = tmp_path / "links" / "latest.mp4"
+    link.parent.mkdir()
+    link.symlink_to(path)
+    assert write_video(link, _frames(5), fps=10) == 5
+    assert link.is_symlink()
+    with VideoReader(path) as video:
+        assert video.frame_count == 5
+    assert sorted(p.name for p in link.parent.iterdir()) == ["latest.mp4"]
 
 
 def _never_read() -> Iterator[np.ndarray]:

@@ -251,26 +251,28 @@ def _out_folder(path: Path, option: str = "--output") -> Path:
     return path
 
 
-RECORDING_FILES = (".mcap", ".db3", ".bag", ".yaml")
-"""Suffixes of the files of a recording folder (its storage files and metadata.yaml): none is an output's."""
-
-
-def _out_file(path: Path, example: str, reads: Iterable[Path | None] = (), option: str = "--output") -> Path:
+def _out_file(path: Path, example: str, reads: Iterable[Path | None] = (), option: str = "--output",
+              recordings: Iterable[Path | None] = ()) -> Path:
     """An option (``--output``) that names a file to write: refused, naming it, when it is an existing folder, lies
-    under a file, is one of the files the command ``reads``, or is a file of a recording folder it reads (its
-    ``metadata.yaml`` or storage files): overwritten, the input would be lost."""
+    under a file, is one of the files the command ``reads`` (overwritten, the input would be lost), or lies inside a
+    recording folder it reads (``recordings``: a folder, or a storage file of one; its metadata.yaml, storage files
+    and ground truth are all inputs)."""
     if path.is_dir():
         raise ConfigError(f"{option} {path}: is a folder; give a file name (e.g. {path / example})")
     _no_folder_under_a_file(path, option)
     if path.exists():
         for r in reads:
-            if r is None or not r.exists():
-                continue
-            inside = r.is_dir() and path.suffix.lower() in RECORDING_FILES and r.resolve() in path.resolve().parents
-            if path.resolve() == r.resolve() or inside:
-                what = f"the input {r}" if not inside else f"a file of the recording {r}"
-                raise ConfigError(f"{option} {path}: is {what} this command reads; writing it would lose it "
+            if r is not None and r.exists() and path.resolve() == r.resolve():
+                raise ConfigError(f"{option} {path}: is the input {r} this command reads; writing it would lose it "
                                   f"(give another file, e.g. {path.with_name(example)})")
+    for r in recordings:
+        if r is None or not r.exists():
+            continue
+        folder = r if r.is_dir() else r.parent if (r.suffix.lower() in (".mcap", ".db3")
+                                                   and (r.parent / "metadata.yaml").is_file()) else None
+        if folder is not None and folder.resolve() in path.resolve().parents:
+            raise ConfigError(f"{option} {path}: is inside the recording {folder} this command reads; write it "
+                              f"beside the recording, not into it (e.g. {folder.parent / example})")
     return path
 
 
@@ -302,12 +304,15 @@ def _check_laser_tables(cfg: Any, config: Path | None, tracker_kind: str) -> Non
     where = f"{config}: " if config is not None else ""
     if cfg.laser:
         check_detector_params(cfg.laser, f"{where}[laser]")
-    if tracker_kind == "any":
+    if tracker_kind == "any":  # a [tracking] table for either tracker; suiting neither, the error of the one
+        # whose keys it uses (the Kalman's when it knows them all, else the particle filter's, the default)
         try:
             _check_laser_tables(cfg, config, "kalman")
             return
-        except ConfigError:
-            tracker_kind = "pf"  # (neither: the particle filter's error, the default tracker's)
+        except ConfigError as err:
+            if "unknown" not in str(err):
+                raise
+            tracker_kind = "pf"
     if cfg.tracking and tracker_kind == "pf":
         from .tracking.tracker import TrackerParams
 
@@ -710,7 +715,7 @@ def track(
 
             if tracker_kind != "pf":
                 raise ConfigError(f"--tracker: the people pipeline uses the pf tracker, got {tracker_kind!r}")
-            cameras = [s.topic for s in cfg.sensors.values() if s.kind == "camera"]
+            cameras = [s.topic for s in cfg.sensors.values() if s.kind in ("camera", "rgbd")]
             if camera_topic is None and len(cameras) == 1:  # the camera the pipeline file names
                 camera_topic = cameras[0]
             elif camera_topic is None and len(cameras) > 1:
@@ -840,7 +845,7 @@ def _track_wearable(sources: list[Path], output: Path, *, config: Path | None, s
     if len(sources) != 1:
         raise ConfigError(f"wearable: one recording at a time (got {len(sources)})")
     cfg = _load_config(config)
-    _check_laser_tables(cfg, config, "pf")  # (unused here, but a typo in the file is an error whatever the run)
+    _check_laser_tables(cfg, config, "any")  # (unused here, but a typo in the file is an error whatever the run)
     _check_sensor_topics(cfg, config, sources, {"imu", "rgbd", "camera"})
     options = {"seed": 0, **cfg.wearable, **({} if seed is None else {"seed": seed})}  # --seed wins
     with progress() as bar:
@@ -870,7 +875,7 @@ def _track_traffic(sources: list[Path], output: Path, *, config: Path | None, ge
     if len(sources) != 1:
         raise ConfigError(f"traffic: one recording at a time (got {len(sources)})")
     cfg = _load_config(config)
-    _check_laser_tables(cfg, config, "pf")  # (unused here, but a typo in the file is an error whatever the run)
+    _check_laser_tables(cfg, config, "any")  # (unused here, but a typo in the file is an error whatever the run)
     _check_sensor_topics(cfg, config, sources, {"laser", "camera"})
     table = dict(cfg.traffic or {})
     in_file = table.pop("calibration", None)
@@ -1147,7 +1152,7 @@ def eval_(
     if not (math.isfinite(threshold) and threshold > 0):  # (named by the option, not the library's threshold_m)
         raise ConfigError(f"--threshold: expected a distance > 0 in metres, got {threshold:g}")
     if output is not None:
-        _out_file(output, "metrics.json", reads=[*_track_files(tracks), ground_truth])
+        _out_file(output, "metrics.json", reads=[*_track_files(tracks), ground_truth], recordings=[ground_truth])
     result: dict[str, Any] = {}
     boxes_at = ConfigError("--at: only for floor-plane tracks (image boxes are scored at their camera's frames)")
     if at is not None and (camera is not None or tracks.suffix == ".txt"):  # refused before any scoring
@@ -1392,8 +1397,8 @@ def calibrate(
     config: Annotated[Path, typer.Option("--config", "-c", help="Pipeline file: the camera's pose is rewritten "
                                          "there (only that line).")],
     points: Annotated[Path | None, typer.Option(help="Control points CSV: x_m,y_m,z_m,u_px,v_px (PnP).")] = None,
-    reference: Annotated[str, typer.Option(help="Frame of the control points: world, or a sensor of the "
-                                           "pipeline (e.g. a laser).")] = "world",
+    reference: Annotated[str | None, typer.Option(help="With --points: frame of the control points, world (the "
+                                                  "default) or a sensor of the pipeline (e.g. a laser).")] = None,
     recording: Annotated[Path | None, typer.Option(help="With --points: a recording whose CameraInfo gives the "
                                                    "intrinsics.")] = None,
     intrinsics: Annotated[str | None, typer.Option(help="With --points: fx,fy,cx,cy[,k1,k2,p1,p2[,k3]].")] = None,
@@ -1401,7 +1406,8 @@ def calibrate(
     adaptive: Annotated[Path | None, typer.Option(help="Instead of points: learn the camera's horizontal bias "
                                                   "from the people seen by camera and lasers in a recording "
                                                   "(seed 000).")] = None,
-    rho: Annotated[float, typer.Option(help="With --adaptive: learning rate of the bias (A10).")] = 0.1,
+    rho: Annotated[float | None, typer.Option(help="With --adaptive: learning rate of the bias (A10; default "
+                                              "0.1).")] = None,
     history: Annotated[Path | None, typer.Option(help="With --adaptive: write the bias history (CSV).")] = None,
     dry_run: Annotated[bool, typer.Option(help="Report only; leave the pipeline file as it is.")] = False,
 ) -> None:
@@ -1415,18 +1421,20 @@ def calibrate(
     if (points is None) == (adaptive is None):
         raise ConfigError("calibrate: give exactly one of --points CSV or --adaptive RECORDING")
     # the options of the other way are refused, not ignored (a user giving them expects them to act)
-    given = {"--rho": rho != 0.1, "--history": history is not None, "--intrinsics": intrinsics is not None,
-             "--recording": recording is not None, "--ransac": ransac, "--reference": reference != "world"}
+    given = {"--rho": rho is not None, "--history": history is not None, "--intrinsics": intrinsics is not None,
+             "--recording": recording is not None, "--ransac": ransac, "--reference": reference is not None}
     other = ("--rho", "--history") if points is not None else ("--intrinsics", "--recording", "--ransac", "--reference")
     if unused := [o for o in other if given[o]]:
         raise ConfigError(f"{', '.join(unused)}: only with {'--adaptive' if points is not None else '--points'} "
                           f"(this run calibrates {'from --points' if points is not None else 'by --adaptive'})")
     if intrinsics is not None and recording is not None:
         raise ConfigError("--intrinsics and --recording both give the camera's intrinsics: give one")
+    rho = 0.1 if rho is None else rho
+    reference = "world" if reference is None else reference
     if not 0.0 < rho <= 1.0:  # (NaN too)
         raise ConfigError(f"--rho: expected a learning rate in (0, 1], got {rho}")
     if history is not None:  # checked before the pipeline file is rewritten: it must not be an input either
-        _out_file(history, "bias.csv", reads=[config, adaptive], option="--history")
+        _out_file(history, "bias.csv", reads=[config], option="--history", recordings=[adaptive])
     cfg = _load_config(config)  # every table checked, as by track (a typo in one is an error whatever the run)
     _check_laser_tables(cfg, config, "any")
     if adaptive is not None:

@@ -233,7 +233,8 @@ def calibrate_from_recording(pipeline: str | Path, camera: str, recording: str |
     recording : str or Path
         A recording with the camera's images and ``CameraInfo`` and the lasers' scans, with people walking.
     lasers : sequence of str, optional
-        Lasers to use (default: every laser of the pipeline file present in the recording).
+        Lasers to use, by their names in the pipeline file (default: every laser of the pipeline file; each must be
+        in the recording, found by its topic).
     params : BiasParams, optional
     poses_from : {"pipeline", "recording"}
         Start from the poses in the pipeline file (a sensor whose table gives no ``pose``: its pose in the
@@ -270,6 +271,11 @@ def calibrate_from_recording(pipeline: str | Path, camera: str, recording: str |
 
     with Recording(recording) as rec:
         name = {n: rec.sensor_of(s.topic) for n, s in cfg.sensors.items()}
+        have = set(rec.topic_types())
+    for n in [camera, *(wanted or [])]:
+        if n in cfg.sensors and cfg.sensors[n].topic not in have:
+            raise RecordingError(f"{recording}: {pipeline}'s [sensors.{n}] topic {cfg.sensors[n].topic!r} is not in "
+                                 f"the recording; it has: {', '.join(sorted(have))}")
     run = bias_from_recording(recording, name.get(camera, camera), [name.get(n, n) for n in wanted or []] or None,
                               params, clock_offsets_ms={name.get(n, n): v for n, v in offsets.items()},
                               cam2world=cam2world,

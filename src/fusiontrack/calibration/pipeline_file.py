@@ -138,9 +138,15 @@ def update_pipeline_pose(text: str, sensor: str, pose: Pose, *, kind: str | None
 
 
 def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+    """The process's umask, read without setting it (os.umask sets it, a race for threads), 0o022 if unknown."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0o022
 
 
 def write_pose_to_pipeline(path: str | Path, sensor: str, pose: Pose, *, kind: str | None = None,

@@ -928,13 +928,14 @@ def evaluate_camera_boxes(truth: Sequence[GroundTruth], tracks: Iterable[TrackSt
     return evaluate_boxes(gt, res, preprocess=True, iou_threshold=iou_threshold, n_frames=len(frames), name=name)
 
 
-def _seq_length(gt_path: Path) -> int | None:
+def _seq_length(gt_path: Path) -> tuple[int, Path] | None:
+    """``seqLength`` and the ``seqinfo.ini`` it was read from (beside the ``gt/`` folder, else beside the file)."""
     for ini in (gt_path.parent.parent / "seqinfo.ini", gt_path.parent / "seqinfo.ini"):
         if ini.is_file():
             parser = configparser.ConfigParser()
             try:
                 parser.read(ini, encoding="utf-8")
-                return int(parser["Sequence"]["seqLength"])
+                return int(parser["Sequence"]["seqLength"]), ini
             except (configparser.Error, KeyError, ValueError) as err:
                 raise EvaluationError(f"{ini}: expected [Sequence] seqLength=<int> ({err})") from err
     return None
@@ -966,13 +967,13 @@ def evaluate_mot_files(gt_path: str | Path, res_path: str | Path, *, preprocess:
             logger.warning("%s: %.0f %% of its boxes are in frames of %s (its frames %d..%d, the truth's %d..%d): "
                         "another sequence, or frames numbered otherwise?", res_path, 100 * inside, gt_path,
                         res.frame.min(), res.frame.max(), gt.frame.min(), gt.frame.max())
-    if n_frames is None:
-        n_frames = _seq_length(gt_path)
+    if n_frames is None and (found := _seq_length(gt_path)) is not None:
+        n_frames, ini = found
         for path, boxes in ((res_path, res), (gt_path, gt)):
-            if n_frames is not None and len(boxes) and int(boxes.frame.max()) > n_frames:
+            if len(boxes) and int(boxes.frame.max()) > n_frames:
                 raise EvaluationError(f"{path}: frame {int(boxes.frame.max())} is past the sequence's last, "
-                                      f"{n_frames} (seqLength of the seqinfo.ini beside {gt_path}): another "
-                                      "sequence, or frames numbered otherwise?")
+                                      f"{n_frames} (seqLength in {ini}): another sequence, or frames numbered "
+                                      "otherwise?")
     return evaluate_boxes(gt, res, preprocess=preprocess, iou_threshold=iou_threshold, n_frames=n_frames,
                           distractor_classes=distractor_classes, name=str(res_path), gt_name=str(gt_path))
 

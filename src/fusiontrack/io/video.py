@@ -390,7 +390,8 @@ def write_video(
     # written beside ``path`` under a hidden name (same suffix: OpenCV picks the container by it) and renamed onto
     # it at the end: a run stopped part way (an error, Ctrl-C) leaves neither a truncated video nor a loss of the
     # one an earlier run wrote there
-    partial = path.with_name(f".{path.stem}.{os.getpid()}.partial{path.suffix}")
+    target = path.resolve() if path.is_symlink() else path  # a linked video is rewritten, the link kept
+    partial = target.with_name(f".{target.stem}.{os.getpid()}.partial{target.suffix}")
     writer: cv2.VideoWriter | None = None
     size: tuple[int, int] | None = None
     n = 0
@@ -421,7 +422,7 @@ def write_video(
             raise ConfigError("frames_bgr: no frames to write")
         writer.release()  # (n > 0: the writer was opened) the container is complete only once released
         writer = None
-        os.replace(partial, path)
+        os.replace(partial, target)
         done = True
     finally:
         if writer is not None:

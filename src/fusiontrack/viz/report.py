@@ -66,12 +66,8 @@ def browser_video(video: str | Path, target: str | Path | None = None) -> Path:
         return video
     if out.is_file() and out.stat().st_size > 0 and out.stat().st_mtime >= video.stat().st_mtime:
         return out
-    try:
-        with VideoReader(video) as reader:
-            write_video(out, iter(reader), fps=reader.fps, fourcc="VP80")
-    except BaseException:
-        out.unlink(missing_ok=True)
-        raise
+    with VideoReader(video) as reader:  # (write_video leaves no partial file, and an earlier copy whole)
+        write_video(out, iter(reader), fps=reader.fps, fourcc="VP80")
     return out
 
 
