@@ -635,6 +635,26 @@ def test_lasers_left_out_by_the_pipeline_file_are_named(simulated, tmp_path):
     assert "left out" not in result.stderr
 
 
+def test_a_broken_world_json_costs_only_the_situation_scores(simulated, tmp_path):
+    """A run folder whose ground_truth/world.json is not the simulator's (overwritten by another output): eval
+    crashed with a KeyError traceback after printing the metrics; now the metrics are written and the situation
+    scores left out with a warning naming the file."""
+    import json
+    import shutil
+
+    run = tmp_path / "run"
+    shutil.copytree(simulated("crowd", seconds=1.5, seed=1), run)
+    (run / "ground_truth" / "world.json").write_text('{"mota": 1.0}')
+    assert _cli("track", str(run), "--no-video", "-o", str(tmp_path / "t")).returncode == 0
+    result = _cli("eval", str(tmp_path / "t"), str(run), "-o", str(tmp_path / "m.json"))
+    assert result.returncode == 0, result.stderr
+    said = " ".join(result.stderr.split())
+    assert "world.json: not the simulator's world description" in said
+    assert "situation detection not scored" in said
+    assert "Traceback" not in result.stderr
+    assert json.loads((tmp_path / "m.json").read_text())["metrics"]["mota"] > 0.3
+
+
 def test_the_people_pipeline_fuses_the_camera_its_pipeline_file_names(simulated, tmp_path):
     """A road recording has two cameras: a pipeline file naming one of them chooses it (the run asked for
     --camera-topic as if the file said nothing); naming both, the error says to choose one."""

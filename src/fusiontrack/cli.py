@@ -33,7 +33,7 @@ from rich.progress import (
 from rich.table import Table
 
 from . import __version__
-from .errors import ConfigError, FusiontrackError
+from .errors import ConfigError, FusiontrackError, RecordingError
 
 app = typer.Typer(
     name="fusiontrack",
@@ -1227,11 +1227,16 @@ def eval_(
         if events and frames and "situation" in frames[0].attributes:
             from .sim.situations import situation_events
 
-            bounds = _bounds_of(ground_truth)
-            truth_events = situation_events(frames, bounds) if bounds is not None else []
-            scores = situation_accuracy(truth_events, events, id_map=metrics.id_map)
-            console.print(situation_table(scores, title="situation detection (seed 001 Table II)"))
-            result["situations"] = {k: v.to_dict() if hasattr(v, "to_dict") else vars(v) for k, v in scores.items()}
+            try:
+                bounds = _bounds_of(ground_truth)
+            except RecordingError as err:  # (the tracking metrics above stand; only the situations need the area)
+                log.warning("%s: situation detection not scored", err)
+            else:
+                truth_events = situation_events(frames, bounds) if bounds is not None else []
+                scores = situation_accuracy(truth_events, events, id_map=metrics.id_map)
+                console.print(situation_table(scores, title="situation detection (seed 001 Table II)"))
+                result["situations"] = {k: v.to_dict() if hasattr(v, "to_dict") else vars(v)
+                                        for k, v in scores.items()}
     if output is not None:
         output.parent.mkdir(parents=True, exist_ok=True)
         from .io.datafile import json_text
@@ -1362,7 +1367,14 @@ def _bounds_of(recording: Path) -> Any:
     world = recording / "ground_truth" / "world.json" if recording.is_dir() else None
     if world is None or not world.exists():
         return None
-    return json.loads(world.read_text())["bounds_m"]
+    try:
+        bounds = json.loads(world.read_text(encoding="utf-8"))["bounds_m"]
+        if len(bounds) != 4 or not all(math.isfinite(float(v)) for v in bounds):
+            raise ValueError(bounds)
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as err:  # (JSONDecodeError: ValueError)
+        raise RecordingError(f"{world}: not the simulator's world description (expected JSON with bounds_m = "
+                             f"[x_min, y_min, x_max, y_max]; {type(err).__name__}: {err})") from None
+    return bounds
 
 
 # --------------------------------------------------------------------------------------------------
