@@ -316,6 +316,11 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
          "hall.toml: is the input"),  # (the pipeline file it rewrites: it became the history CSV)
         (["calibrate", "camera_0", "-c", "{hall}", "--adaptive", "{rec}", "--history", "{rec}/ground_truth/a.csv"],
          "is inside the recording"),
+        (["pdr", "{tmp}/steps.csv", "-o", "{tmp}"], "its steps.csv would overwrite the input"),  # (pdr's own output)
+        (["fit-step-model", "walk.csv", "-l", "0", "-o", "{out}.json"], "--length: expected distances walked > 0 m"),
+        # a file the pipeline file names is read relative to it (as [traffic] calibration), and named so
+        (["track", "{demo}", "-o", "{out}", "--pipeline", "wearable", "-c", "{wearable_model}"],
+         "wearable_model.toml: [wearable] step_model: "),
         # calibrate's options of the other way: refused, not ignored
         (["calibrate", "camera_0", "-c", "{hall}", "--points", "{two_points}", "--rho", "0.5", "--history", "h.csv"],
          "--rho, --history: only with --adaptive"),
@@ -372,7 +377,8 @@ def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args
               "wearable_typo": "[wearable]\nphone = 'a'\n", "traffic_workers": "[traffic]\nworkers = -3\n",
               "topic_missing": '[sensors.front]\nkind = "laser"\ntopic = "/nope"\n',
               "offset_inf": '[sensors.l0]\nkind = "laser"\ntopic = "/scan"\nclock_offset_ms = inf\n',
-              "kalman_bad": "[tracking]\ngate_m = -1.0\n"}
+              "kalman_bad": "[tracking]\ngate_m = -1.0\n",
+              "wearable_model": '[wearable]\nstep_model = "models/me.json"\n'}
     for name, text in tables.items():
         (tmp_path / f"{name}.toml").write_text(text)
     (tmp_path / "a_file").write_text("")
@@ -381,6 +387,7 @@ def test_cli_prints_one_clear_line_and_exits_nonzero(shared_data, tmp_path, args
     (tmp_path / "rec").mkdir()  # a recording folder (what an output must not overwrite in it: checked first)
     (tmp_path / "rec" / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
     (tmp_path / "rec" / "r.mcap").write_bytes(b"")
+    (tmp_path / "steps.csv").write_text("t_s,ax,ay,az\n")  # an IMU file where pdr would write its steps.csv
     (tmp_path / "hall.toml").write_text('[sensors.camera_0]\nkind = "camera"\ntopic = "/camera_0/image"\n'
                                         'pose = { x = 0.0, y = 0.0, z = 3.0, yaw_deg = 0.0 }\n')
     (tmp_path / "two_points.csv").write_text("x_m,y_m,z_m,u_px,v_px\n0,0,0,100,400\n1,0,0,200,400\n")

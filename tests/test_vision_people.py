@@ -385,3 +385,20 @@ def test_cli_camera_options_need_the_camera_pipeline(tmp_path):
     result = run_cli("track", str(tmp_path), "--detections", "det.txt", "-o", str(tmp_path / "o"), ok=False)
     assert result.returncode == 2
     assert "only for --pipeline people-camera" in " ".join(result.stderr.split())
+
+
+def test_detections_numbered_past_the_video_are_warned_of(shared_data: Path, tmp_path: Path, caplog) -> None:
+    """PETS's public detections with 800 added to every frame number (another sequence's, or numbered otherwise):
+    none falls on one of the video's 795 frames, so none would ever be used; said, naming the file and both ranges
+    (it gave 0 tracks and exit code 0 without a word). The file as published is not warned of."""
+    det_file = shared_data / DETS
+    shifted = tmp_path / "shifted.txt"
+    shifted.write_text("".join(",".join([str(int(float(r.split(",")[0])) + 800), *r.split(",")[1:]]) + "\n"
+                               for r in det_file.read_text().split()))
+    with caplog.at_level("WARNING"):
+        track_camera(shared_data / VIDEO, detections=shifted, detection_scale=PETS_SCALE, max_frames=2)
+    assert "shifted.txt: 0 % of its boxes are in frames 1..795 of" in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        track_camera(shared_data / VIDEO, detections=det_file, detection_scale=PETS_SCALE, max_frames=2)
+    assert "of its boxes are in frames" not in caplog.text

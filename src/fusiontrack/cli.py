@@ -848,6 +848,12 @@ def _track_wearable(sources: list[Path], output: Path, *, config: Path | None, s
     _check_laser_tables(cfg, config, "any")  # (unused here, but a typo in the file is an error whatever the run)
     _check_sensor_topics(cfg, config, sources, {"imu", "rgbd", "camera"})
     options = {"seed": 0, **cfg.wearable, **({} if seed is None else {"seed": seed})}  # --seed wins
+    model = options.get("step_model")
+    if isinstance(model, str) and model and config is not None:  # a file named by the pipeline file: relative to it,
+        path = config.parent / model  # as [traffic] calibration is (it was read relative to the working directory)
+        if not path.is_file():
+            raise ConfigError(f"{config}: [wearable] step_model: {path}: no such file")
+        options["step_model"] = str(path)
     with progress() as bar:
         task = bar.add_task("tracking (wearable)", total=None)
         summary = run_wearable(sources[0], output, **options)
@@ -1595,6 +1601,12 @@ def pdr(
     from .inertial import pdr_from_file, write_pdr
 
     _out_folder(output)
+    for name in ("steps.csv", "trajectory.csv"):  # the files it writes: not its inputs, nor in the recording read
+        out = output / name
+        for r in (source, step_model):
+            if r is not None and out.exists() and r.exists() and out.resolve() == r.resolve():
+                raise ConfigError(f"--output {output}: its {name} would overwrite the input {r}; give another folder")
+        _out_file(out, name, recordings=[source])
     result = pdr_from_file(source, step_model, sensor=sensor)
     paths = write_pdr(result, output)
     gyro = "" if result.has_gyro else " (no gyroscope: headings held constant)"
@@ -1615,6 +1627,8 @@ def fit_step_model(
 
     if len(length) != len(walks):
         raise ConfigError(f"--length: expected one per walk ({len(walks)}), got {len(length)}")
+    if bad := [v for v in length if not (math.isfinite(v) and v > 0)]:
+        raise ConfigError(f"--length: expected distances walked > 0 m, got {', '.join(f'{v:g}' for v in bad)}")
     _out_file(output, "step_model.json", reads=walks)
     model = step_model_from_files(walks, length, subject=subject)
     model.save(output)

@@ -946,6 +946,13 @@ def track_camera(
                         detections if isinstance(detections, str | Path) else "detections", min_score,
                         float(np.min(det.conf)), float(np.max(det.conf)))
     frames = _Frames(source, camera_topic, camera, time_source)
+    if det is not None and len(det) and frames.count > 0:  # (a file of another sequence, or numbered otherwise)
+        inside = float(np.mean(det.frame <= frames.count))
+        if inside < 0.5:
+            log.warning("%s: %.0f %% of its boxes are in frames 1..%d of %s (its frames %d..%d): another sequence, "
+                        "or frames numbered otherwise? The others are never used",
+                        detections if isinstance(detections, str | Path) else "detections", 100 * inside,
+                        frames.count, frames.paths[0], int(det.frame.min()), int(det.frame.max()))
     try:
         with opencv_threads(1):  # small frames: OpenCV's worker threads cost more CPU than they save
             return _run(frames, det, params, min_score, foreground, blob_params, complete_height_m, colour,
