@@ -34,6 +34,7 @@ import numpy as np
 
 from ..errors import ConfigError, RecordingError
 from ..io.recording import Recording
+from ..io.sync import synchronize
 from ..tracking.baseline import CVKalmanTracker
 from ..tracking.vehicle_pf import FusedObject, VehicleModeTracker, VehiclePfParams
 from ..types import Detection, Event, Image, LaserScan, TrackState
@@ -489,7 +490,11 @@ def track_traffic(path: str | Path, *, roads: Any = None, geometry: Any = None, 
             laser.prime(_every_nth_scan(rec.messages(laser_topics, time_source=time_source, start_ns=start_ns,
                                                      stop_ns=stop_ns), p.laser_every))
         try:
-            stream = iter(rec.messages(topics, time_source=time_source, start_ns=start_ns, stop_ns=stop_ns))
+            # in time order, a message stamped far ahead (a bad stamp) dropped and counted, as the people pipelines
+            # read theirs: used as it came, one scan 100 s ahead made every later scan and frame look late (all
+            # skipped: 0.71 -> 0.09 MOTA on a 20 s road)
+            stream = iter(synchronize(rec.messages(topics, time_source=time_source, start_ns=start_ns,
+                                                   stop_ns=stop_ns)))
             while True:
                 start("read")  # reading and decoding, the frames and scans a branch skips included
                 try:
