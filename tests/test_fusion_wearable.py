@@ -312,3 +312,28 @@ def test_person_blob_takes_the_person_not_a_bystander():
     assert _person_blob(Camera, own - np.array([0.0, 60.0, 0.0, 60.0]), pred, none, p, near=ct_box) is None
     short = np.array([[305.0, 170.0, 333.0, 299.0]])
     assert np.allclose(_person_blob(Camera, short, pred, none, p, near=ct_box), [305.0, 99.0, 333.0, 299.0])
+
+
+def test_an_imu_message_stamped_ahead_or_back_costs_itself(simulated, caplog):
+    """In log order, one IMU message stamped 100 s ahead and one 1 s back (bad stamps): sorted as they came, the
+    phone's trajectory ran to 103 s of a 10 s recording (or began 1 s early), without a word. As the CSV reader does,
+    each costs itself, with a warning; the dead reckoning is the clean one's (the same steps, the same span)."""
+    from fusiontrack.fusion.wearable_data import dead_reckon_phone
+
+    path = simulated("wearable_crossing", seconds=16, seed=0)
+    with Recording(path) as rec:
+        samples = [m for m in rec.messages(["/phone_a/imu"]) if isinstance(m, ImuSample)]
+    t = np.array([s.t_ns for s in samples], np.int64)
+    accel = np.array([s.accel_mps2 for s in samples])
+    gyro = np.array([s.gyro_radps for s in samples])
+    clean = dead_reckon_phone("phone_a", t, accel, gyro)
+    bad = t.copy()
+    bad[900] += 100 * 10**9  # (9 s and 12 s in: the phone's carrier walks)
+    bad[1200] -= 10**9
+    with caplog.at_level("WARNING"):
+        got = dead_reckon_phone("phone_a", bad, accel, gyro)
+    assert "phone phone_a: dropped 2 IMU message(s) stamped out of order" in caplog.text
+    assert got.n_samples == clean.n_samples - 2
+    assert (got.t_ns[0], got.t_ns[-1]) == (clean.t_ns[0], clean.t_ns[-1])
+    assert got.pdr.n_steps == clean.pdr.n_steps
+    assert clean.pdr.n_steps > 5

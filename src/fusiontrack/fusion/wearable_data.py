@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..geometry import TransformTree
 from ..inertial import PdrResult, run_pdr
-from ..inertial.pdr_io import drop_unusable_imu
+from ..inertial.pdr_io import drop_unusable_imu, imu_time_order
 from ..inertial.step_length import StepLengthModel
 from ..io.recording import Recording
 from ..types import CameraInfo, DepthImage, ImuSample, Transform
@@ -193,14 +193,16 @@ def dead_reckon_phone(name: str, t_ns: np.ndarray, accel: np.ndarray, gyro: np.n
                       heading0_rad: float = 0.0, gap_s: float = 0.25) -> PhoneTrack:
     """Run C1-C5 on one phone's samples and put the trajectory on a uniform grid.
 
-    Samples are sorted by stamp; repeated stamps are kept (the resampler averages them). Gaps longer than
+    Samples are put in time order (:func:`~fusiontrack.inertial.pdr_io.imu_time_order`: given in log order, a message
+    stamped ahead of or behind its neighbours is dropped with a warning); repeated stamps are kept (the resampler
+    averages them). Gaps longer than
     ``gap_s`` are recorded: the preprocessing bridges them linearly, so no step is counted in a gap and the
     heading carries on with the interpolated gyro. Messages with a non-finite acceleration (or gyroscope) are
     dropped first (:func:`~fusiontrack.inertial.pdr_io.drop_unusable_imu`). An unusable stream (fewer than 2
     samples, too short for the step filter) gives a track without dead reckoning and the reason in ``error``.
     """
     t = np.asarray(t_ns, dtype=np.int64)
-    order = np.argsort(t, kind="stable")
+    order = imu_time_order(f"phone {name}", t)  # (a message stamped ahead or back costs itself, with a warning)
     t, accel, gyro = t[order], np.asarray(accel, np.float64)[order], np.asarray(gyro, np.float64)[order]
     if t.size:  # a NaN message costs itself, not the phone's dead reckoning
         t, accel, gyro = drop_unusable_imu(f"phone {name}", t, accel, gyro)

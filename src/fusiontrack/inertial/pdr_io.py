@@ -100,15 +100,40 @@ def load_imu(path: str | Path, *, sensor: str | None = None) -> ImuStream:
     if len(samples) < 2:
         raise RecordingError(f"{path}: {len(samples)} readable IMU message(s) on {chosen[0]}; need at least 2")
     t = np.array([s.t_ns for s in samples], dtype=np.int64)
-    order = np.argsort(t, kind="stable")
-    if np.any(order != np.arange(t.size)):
-        log.info("%s: IMU header stamps out of log order; sorted", path)
+    order = imu_time_order(f"{path} ({chosen[0]})", t)
     accel = np.stack([s.accel_mps2 for s in samples])[order]
     gyro = np.stack([s.gyro_radps for s in samples])[order]
     t, accel, gyro = drop_unusable_imu(str(path), t[order], accel, gyro)
     if t.size < 2:
         raise RecordingError(f"{path}: {t.size} IMU message(s) with a finite acceleration; need at least 2")
     return ImuStream(t, accel, gyro, str(path), name)
+
+
+def imu_time_order(where: str, t_ns: np.ndarray) -> np.ndarray:
+    """Which of a recording's IMU messages (stamps ``t_ns`` in log order) to use, as indices in time order, by the
+    CSV reader's rules (:mod:`fusiontrack.io.imu_csv`): a message whose stamp breaks the order (stamped ahead of or
+    behind its neighbours) costs itself, with a warning, while such messages are few (the fewest that put the rest
+    in order; at most :data:`~fusiontrack.io.csvtable.MAX_BAD_ROW_SHARE` of them, or one); a stream delivered out of
+    order more than that is sorted; then a first or last message stamped far from all the others is dropped. Sorted
+    as they came, one message stamped 100 s ahead stretched the phone's trajectory to 100 s."""
+    from ..io.csvtable import MAX_BAD_ROW_SHARE
+    from ..io.imu_csv import _longest_in_order, _stray_ends
+
+    t = np.asarray(t_ns, np.int64)
+    if t.size and np.any(np.diff(t) < 0):
+        keep = _longest_in_order(t)
+        n_drop = int(np.count_nonzero(~keep))
+        if n_drop <= max(1, int(MAX_BAD_ROW_SHARE * t.size)):
+            log.warning("%s: dropped %d IMU message(s) stamped out of order (ahead of or behind their neighbours; "
+                        "message %s)", where, n_drop, ", ".join(str(int(k) + 1) for k in np.flatnonzero(~keep)[:5]))
+            idx = np.flatnonzero(keep)
+        else:
+            log.info("%s: IMU header stamps out of log order; sorted", where)
+            idx = np.argsort(t, kind="stable")
+    else:
+        idx = np.arange(t.size)
+    keep = _stray_ends(where, t[idx], idx + 1, np.ones(idx.size, bool), unit="message")
+    return idx[keep]
 
 
 def drop_unusable_imu(where: str, t: np.ndarray, accel: np.ndarray, gyro: np.ndarray

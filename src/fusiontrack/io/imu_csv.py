@@ -126,7 +126,8 @@ STRAY_GAP_S = 1.0
 """A first or last sample this far (or 100 sampling intervals, if longer) from the rest of the log is dropped."""
 
 
-def _stray_ends(path: Path, t_ns: np.ndarray, line_numbers: np.ndarray, keep: np.ndarray) -> np.ndarray:
+def _stray_ends(path: Path | str, t_ns: np.ndarray, line_numbers: np.ndarray, keep: np.ndarray,
+                unit: str = "line") -> np.ndarray:
     """``keep`` without a first or last sample stamped far from all the others (a clock glitch at the start or end
     of a log: one row stamped ahead as the phone stopped writing, or one far back): in time order, so nothing else
     marks it, and it would stretch the log's span (``info``, trajectories) by the gap. Dropped with a warning; a log
@@ -144,8 +145,8 @@ def _stray_ends(path: Path, t_ns: np.ndarray, line_numbers: np.ndarray, keep: np
     for end, gap in ((rows[0], dt[0]), (rows[-1], dt[-1])):
         if gap > limit:
             keep[end] = False
-            logger.warning("%s, line %d: dropped a sample stamped %.3g s from the rest of the log, alone at its %s "
-                           "(a clock glitch?)", path, int(line_numbers[end]), gap / 1e9,
+            logger.warning("%s, %s %d: dropped a sample stamped %.3g s from the rest of the log, alone at its %s "
+                           "(a clock glitch?)", path, unit, int(line_numbers[end]), gap / 1e9,
                            "start" if end == rows[0] else "end")
     return keep
 
