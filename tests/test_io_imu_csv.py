@@ -163,6 +163,26 @@ def test_generic_gyro_glitches_cost_their_samples_and_a_dead_gyro_is_dropped(tmp
     assert np.isnan(imu.gyro_radps).all()
 
 
+@pytest.mark.parametrize("missing", ["", " "])
+def test_empty_gyro_cells_are_a_missing_gyro_as_nan_is(tmp_path: Path, missing: str) -> None:
+    """A spreadsheet leaves a missing value's cell empty (``0,0,9.81,,,``): read as NaN is, so the rules for a gyro
+    that is missing in places or from most rows apply (the rows were refused: "expected a number, got ''"; and with
+    every gyro cell empty, the trailing-comma rule took one away: "expected 7 values, got 6")."""
+    t = np.arange(10) * 0.01
+    p, q = tmp_path / "empty.csv", tmp_path / "nan.csv"
+    for path, gap in ((p, missing), (q, "nan")):
+        for name, dead in (("glitch", [3]), ("died", list(range(3, 10))), ("none", list(range(10)))):
+            rows = [f"{x:.2f},0,0,9.81," + (",".join([gap] * 3) if k in dead else "0.1,0.2,0.3")
+                    for k, x in enumerate(t)]
+            path.with_name(f"{name}_{path.name}").write_text("t_s,ax,ay,az,gx,gy,gz\n" + "\n".join(rows) + "\n")
+    for name, n in (("glitch", 9), ("died", 10), ("none", 10)):
+        a, b = read_imu_csv(tmp_path / f"{name}_empty.csv"), read_imu_csv(tmp_path / f"{name}_nan.csv")
+        assert len(a) == len(b) == n
+        np.testing.assert_array_equal(a.t_ns, b.t_ns)
+        np.testing.assert_array_equal(a.accel_mps2, b.accel_mps2)
+        np.testing.assert_array_equal(a.gyro_radps, b.gyro_radps)
+
+
 def test_generic_t_ns_exact_and_column_order(tmp_path: Path) -> None:
     t0 = 1_700_000_000_123_456_789  # beyond float64's exact integers
     p = tmp_path / "phone.csv"

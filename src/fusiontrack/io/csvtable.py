@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -75,6 +76,9 @@ def _row_problem(lineno: int, line: str, expected: int, int_cols: Sequence[int],
     return None
 
 
+_EMPTY_FIELD = re.compile(r"(^|,)[ \t]*(?=,|$)")
+
+
 def read_numeric_table(
     path: str | Path,
     *,
@@ -84,6 +88,7 @@ def read_numeric_table(
     comment: str = "#",
     what: str = "a numeric CSV file",
     skip_bad_rows: bool = False,
+    empty_as_nan: bool = False,
 ) -> NumericTable:
     """Read a comma-separated file of numbers, with errors that name the file and line.
 
@@ -100,6 +105,8 @@ def read_numeric_table(
         Lines starting with this (after leading blanks) are skipped, as are blank lines.
     what : str
         What the file should be, for error messages (e.g. ``"t_ns, ax, ay, az"``).
+    empty_as_nan : bool
+        Read an empty field (``1.0,,2.0``) as NaN instead of refusing its row.
     skip_bad_rows : bool
         For a sensor log, where a row cut short (the recorder stopped mid-write) or garbled must not cost the
         rest: rows with the wrong number of values, or a value that is not a number, are dropped with a
@@ -122,9 +129,15 @@ def read_numeric_table(
             if line.strip() and not line.lstrip().startswith(comment)]
     if rows and "\t" in rows[0][1] and "," not in rows[0][1]:
         raise RecordingError(f"{path}, line {rows[0][0]}: tab-separated values; expected comma-separated ({what})")
-    # a comma ending every line (some exporters write one) closes the last value; it opens no empty column
-    if rows and all(line.rstrip().endswith(",") for _, line in rows[1 if header else 0:]):
+    # a comma ending every line (some exporters write one) closes the last value; it opens no empty column (unless
+    # the header names one more: an empty last column, e.g. a sensor that gave nothing)
+    data = rows[1 if header else 0:]
+    if data and all(line.rstrip().endswith(",") for _, line in data) and not (
+            header and len(rows[0][1].rstrip().removesuffix(",").split(",")) == len(data[0][1].split(","))):
         rows = [(i, line.rstrip().removesuffix(",")) for i, line in rows]
+    if empty_as_nan:  # an empty field is a value the sensor did not give: NaN (the caller's rules decide)
+        first = 1 if header else 0
+        rows = rows[:first] + [(i, _EMPTY_FIELD.sub(r"\1nan", line)) for i, line in rows[first:]]
     names: list[str] | None = None
     if header:
         if not rows:

@@ -352,7 +352,7 @@ _MAX_SAMPLE_STEP_S = 1.0
 
 
 def _read_generic(path: Path, sensor: str, frame_id: str) -> ImuCsv:
-    table = read_numeric_table(path, header=True, what=_GENERIC_DOC, skip_bad_rows=True)
+    table = read_numeric_table(path, header=True, what=_GENERIC_DOC, skip_bad_rows=True, empty_as_nan=True)
     names = [n.lower() for n in table.header or []]
     missing = [n for n in ("ax", "ay", "az") if n not in names]
     if not {"t_ns", "t_ms", "t_s"} & set(names) or missing:
