@@ -372,3 +372,17 @@ def test_a_csv_with_both_t_and_t_ns_is_read_by_t_ns_as_tracks_and_as_truth(tmp_p
         for i, xy in zip(g.ids, g.positions_m, strict=True):
             (s,) = [s for s in tracks if s.t_ns == g.t_ns and s.track_id == i]
             np.testing.assert_array_equal(s.position_m, xy)
+
+
+def test_a_pretty_printed_json_document_is_told_from_json_lines(tmp_path: Path) -> None:
+    """A run's summary.json given where tracks (JSON lines) are read: "line 1: not JSON" of a valid JSON file
+    misled; the message says what the file is and what to give."""
+    path = tmp_path / "summary.json"
+    path.write_text(json.dumps({"tracks": 3, "metrics": {"mota": 0.7}}, indent=2))
+    with pytest.raises(RecordingError, match=r"summary.json, line 1: not JSON .*one JSON document, not JSON lines"):
+        read_jsonl(path)
+    (tmp_path / "bad.jsonl").write_text('{"t_ns": 1, oops}\n')
+    with pytest.raises(RecordingError) as err:  # a broken line of JSON lines: no such hint
+        read_jsonl(tmp_path / "bad.jsonl")
+    assert "bad.jsonl, line 1: not JSON" in str(err.value)
+    assert "one JSON document" not in str(err.value)

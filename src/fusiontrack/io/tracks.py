@@ -702,7 +702,12 @@ def read_jsonl(path: str | Path) -> list[JsonRecord]:
                 _checked_times(obj)
                 records.append(_record_from_json(obj))
             except json.JSONDecodeError as err:
-                raise RecordingError(f"{path}, line {lineno}: not JSON ({err.msg} at column {err.colno})") from err
+                whole = ""
+                if lineno == 1 and line.strip() in ("{", "["):  # a JSON document spread over lines, not JSON lines
+                    whole = ("; the file looks like one JSON document, not JSON lines (one record per line), e.g. a "
+                             "summary.json: give the run's tracks.jsonl")
+                raise RecordingError(f"{path}, line {lineno}: not JSON ({err.msg} at column {err.colno}){whole}"
+                                     ) from err
             except KeyError as err:
                 raise RecordingError(f"{path}, line {lineno}: missing key {err.args[0]!r}") from err
             except (ValueError, TypeError) as err:
