@@ -18,6 +18,7 @@ from fusiontrack.laser.vehicles import (
     LaserVehicleDetector,
     RoadROI,
     box_heading,
+    bridge_dropouts,
     classify_extents,
     complete_boxes,
     fit_boxes,
@@ -500,3 +501,40 @@ def test_priming_detects_vehicles_from_their_first_scans_then_learns_as_online(r
     assert first["primed"] <= visible_at + 0.5
     for sensor in ("laser_0", "laser_1"):
         np.testing.assert_array_equal(online.background(sensor).background_m, primed.background(sensor).background_m)
+
+
+def test_a_car_side_with_dropped_beams_stays_one_cluster() -> None:
+    """A car's side 20 m off, beams 0.25 deg apart, with dropouts (no reading: a dark or shiny body) in it: A8 alone
+    cuts it at each (three clusters); the dropouts bridged, it is one, its ranges between its neighbours'. A gap
+    where the scan saw the background, or one wider than max_gap, or across a jump in range, is left alone."""
+    inc = math.radians(0.25)
+    n = 60
+    r = np.full(n, np.nan)
+    r[10:50] = 20.0 + 0.01 * np.arange(40)  # the side, slightly slanted
+    invalid = np.zeros(n, bool)
+    moving = r.copy()
+    for k in (20, 21, 35):  # dropouts: no reading at all
+        moving[k] = np.nan
+        invalid[k] = True
+    labels, _, _ = segment_scan(moving, 0.0, inc, c0_m=0.5, n_min=1)
+    assert np.unique(labels[labels >= 0]).size == 3
+    filled = bridge_dropouts(moving, invalid, inc, 0.5)
+    assert sorted(filled.tolist()) == [20, 21, 35]
+    np.testing.assert_allclose(moving[[20, 21, 35]], r[[20, 21, 35]], atol=1e-9)  # (a straight side: exact)
+    labels, _, _ = segment_scan(moving, 0.0, inc, c0_m=0.5, n_min=1)
+    assert np.unique(labels[labels >= 0]).size == 1
+    # not filled: a background beam in the gap (the scan had a reading there), 4 dropouts in a row, a range jump
+    m2 = r.copy()
+    m2[[20, 21]] = np.nan
+    inv2 = np.zeros(n, bool)
+    inv2[20] = True  # beam 21 read the wall behind: a real gap
+    assert bridge_dropouts(m2, inv2, inc, 0.5).size == 0
+    m3 = r.copy()
+    m3[20:24] = np.nan
+    assert bridge_dropouts(m3, np.isnan(m3) & (np.arange(n) >= 10) & (np.arange(n) < 50), inc, 0.5).size == 0
+    m4 = r.copy()
+    m4[30:] += 3.0  # another car 3 m behind from beam 30 on, one dropout between them
+    m4[29] = np.nan
+    inv4 = np.zeros(n, bool)
+    inv4[29] = True
+    assert bridge_dropouts(m4, inv4, inc, 0.5).size == 0

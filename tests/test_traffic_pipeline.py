@@ -238,6 +238,33 @@ def test_a_scan_stamped_far_ahead_is_dropped_not_followed(road, monkeypatch, cap
     assert m.precision >= 0.8
 
 
+def test_beams_without_a_reading_do_not_break_vehicles_apart(road, monkeypatch):
+    """2 % of every scan's beams give no reading (NaN, as dropouts on dark or shiny bodies do): A8 cut each vehicle at
+    them, and the pieces became false tracks (on a 20 s road: 1435 false laser positives, fused MOTA 0.71 -> 0.16).
+    Bridged, the vehicles are tracked as well as on the clean recording (test above: recall, precision)."""
+    from fusiontrack.types import LaserScan
+
+    path, gt = road
+    real = Recording.messages
+    rng = np.random.default_rng(3)
+
+    def dropouts(self, *args, **kwargs):
+        for msg in real(self, *args, **kwargs):
+            if isinstance(msg, LaserScan):
+                ranges = msg.ranges_m.copy()
+                ranges[rng.random(ranges.size) < 0.02] = np.nan
+                msg = replace(msg, ranges_m=ranges)
+            yield msg
+
+    monkeypatch.setattr(Recording, "messages", dropouts)
+    res = track_traffic(path, params=TrafficParams(workers=0), variants=("laser", "fusion_pf"))
+    m = evaluate_vehicles(*_after_warm_up(gt, res.states["fusion_pf"]), area=AREA, rate_hz=15)
+    assert m.recall >= 0.8
+    assert m.precision >= 0.8
+    laser = evaluate_vehicles(*_after_warm_up(gt, res.states["laser"]), area=AREA, rate_hz=15)
+    assert laser.precision >= 0.8
+
+
 def test_cli_track_traffic_and_events_rerun(road, tmp_path):
     path, _ = road
     out = tmp_path / "traffic"

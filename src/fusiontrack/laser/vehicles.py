@@ -66,7 +66,7 @@ from fusiontrack.laser.background import (
     learn_short_backgrounds,
     switch_geometry,
 )
-from fusiontrack.laser.clustering import segment_scan
+from fusiontrack.laser.clustering import breakpoint_c1, segment_scan
 from fusiontrack.laser.detector import planar_pose
 from fusiontrack.tracking import kalman
 from fusiontrack.tracking.association import hungarian
@@ -81,6 +81,7 @@ __all__ = [
     "LaserVehicleDetector",
     "RoadROI",
     "box_heading",
+    "bridge_dropouts",
     "classify_extents",
     "complete_boxes",
     "fit_boxes",
@@ -266,6 +267,38 @@ class _Clusters:
     qy: np.ndarray
     srel: np.ndarray | None  # (kp, 2) sensor minus cluster mean, or None
     ordered: bool  # the points were given sorted by cluster, none dropped (``starts`` index them as given)
+
+
+def bridge_dropouts(moving: np.ndarray, invalid: np.ndarray, angle_increment_rad: float, c0_m: float,
+                    max_gap: int = 3) -> np.ndarray:
+    """Fill, in place, the gaps of at most ``max_gap`` beams between two foreground beams of ``moving`` (ranges, NaN
+    elsewhere) where the scan gave no reading (``invalid``: a dropout on a dark or shiny body, NaN, 0, beyond range)
+    and the two are within A8's breakpoint of each other across the gap (``C0 + C1 min(r) (gap + 1)``): the gap's
+    beams get ranges interpolated between them, so one vehicle stays one cluster [RECON: A8 ends a cluster at an
+    invalid beam; on a 20 s road 0.5 % of beams invalid made 251 false laser tracks, 2 % made 1435, fused MOTA 0.71
+    -> 0.16]. A gap showing the background (a beam with a reading) is never filled. Returns the filled beams."""
+    fg = np.flatnonzero(np.isfinite(moving))
+    if fg.size < 2:
+        return np.zeros(0, np.int64)
+    a, b = fg[:-1], fg[1:]
+    gap = b - a - 1
+    n_invalid = np.cumsum(np.r_[0, invalid.astype(np.int64)])
+    ok = (gap >= 1) & (gap <= max_gap) & (n_invalid[b] - n_invalid[a + 1] == gap)
+    if not ok.any():
+        return np.zeros(0, np.int64)
+    a, b, gap = a[ok], b[ok], gap[ok]
+    ra, rb = moving[a], moving[b]
+    d2 = ra * ra + rb * rb - 2.0 * ra * rb * np.cos((gap + 1) * angle_increment_rad)
+    th = c0_m + breakpoint_c1(angle_increment_rad) * np.minimum(ra, rb) * (gap + 1)
+    near = d2 <= th * th
+    a, gap, ra, rb = a[near], gap[near], ra[near], rb[near]
+    if not a.size:
+        return np.zeros(0, np.int64)
+    pair = np.repeat(np.arange(a.size), gap)  # the gap's beams, pair by pair
+    step = np.arange(pair.size) - np.repeat(np.cumsum(gap) - gap, gap) + 1  # 1 .. gap within each pair
+    beams = a[pair] + step
+    moving[beams] = ra[pair] + (rb[pair] - ra[pair]) * step / (gap[pair] + 1)
+    return beams
 
 
 def _clusters(p: np.ndarray, lab: np.ndarray, k: int, sensor: np.ndarray | None) -> _Clusters:
@@ -1142,6 +1175,10 @@ class LaserVehicleDetector:
             return []
         moving = np.full(r.size, np.nan)
         moving[beams] = r[beams]
+        filled = bridge_dropouts(moving, np.isnan(r), scan.angle_increment_rad, self.c0_m)
+        if filled.size:  # the filled beams are points of their vehicle from here on
+            r = r.copy()
+            r[filled] = moving[filled]
         beam_labels, n_points, mean_range = segment_scan(moving, scan.angle_min_rad, scan.angle_increment_rad,
                                                          c0_m=self.c0_m, n_min=self.min_points,
                                                          grazing_deg=self.grazing_deg)
