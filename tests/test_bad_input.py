@@ -737,3 +737,24 @@ def test_a_recording_stopped_part_way_is_removed_not_left_looking_whole(tmp_path
     with pytest.raises(RecordingError, match="already exists"):
         refused()
     assert (theirs / "data.txt").read_text() == "precious"
+
+
+def test_a_simulation_stopped_by_sigterm_leaves_nothing(tmp_path):
+    """kill (SIGTERM: a scheduler's stop) during simulate left a half-written recording, and the next run refused
+    the folder as existing; it now goes through Ctrl-C's clean-up: the incomplete recording is removed."""
+    import signal
+    import time
+
+    out = tmp_path / "sim"
+    proc = subprocess.Popen([sys.executable, "-m", "fusiontrack", "simulate", "crowd", "--seconds", "60", "-o",
+                             str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not out.exists() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.1)
+    assert out.exists(), "the recording was never started"
+    time.sleep(1.0)  # part way through
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode != 0
+    assert "incomplete recording" in err
+    assert not out.exists()

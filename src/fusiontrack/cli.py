@@ -1770,9 +1770,19 @@ def os_error_line(err: OSError) -> str:
     return f"cannot write {file.name}: {reason}" if file is not None else reason
 
 
+def _terminated(signum: int, frame: Any) -> None:
+    """SIGTERM (a job scheduler's stop, ``kill``) stops a run as Ctrl-C does, through the same clean-up: a recording
+    being written is removed, a video being written leaves the earlier one (a stopped simulate left a half folder
+    that the next run refused as existing)."""
+    raise KeyboardInterrupt  # (exit code 130, as for Ctrl-C)
+
+
 def main() -> None:
     """Entry point: run the app, turning fusiontrack's errors (and the OS's, writing the outputs) into one clear
     line and exit code 2."""
+    import signal
+
+    signal.signal(signal.SIGTERM, _terminated)
     try:
         app()
     except FusiontrackError as err:
