@@ -668,3 +668,74 @@ def test_exclusive_box_scores_ignore_the_overlap_of_two_boxes():
     s = bank.box_scores(img, inner, [1, 2], exclusive=True)
     assert np.isnan(s[1]).all()  # every patch of the inner box is inside the outer one
     assert np.isfinite(s[0]).all()
+
+
+def _front_and_back() -> tuple[np.ndarray, dict[int, tuple[int, int, int, int]]]:
+    """Red (target 1) standing in front of blue (target 2): red's box covers part of blue's, and there the image
+    shows red."""
+    boxes = {1: (90, 60, 150, 200), 2: (40, 40, 120, 170)}
+    img = np.full((H, W, 3), 128, np.uint8)
+    img[40:170, 40:120] = BLUE
+    img[60:200, 90:150] = RED  # drawn last: in front
+    return img, boxes
+
+
+def _wholly(samples: np.ndarray, bgr: tuple[int, int, int]) -> np.ndarray:
+    return np.isclose(samples[:, :12].reshape(-1, 4, 3), _colour(bgr), atol=1e-6).all(axis=(1, 2))
+
+
+def test_depth_order_learns_the_overlap_for_the_target_in_front():
+    """B15 drops every patch centred where two boxes overlap. With the targets' distances from the camera, the
+    patches there show the nearer one: they are learnt for it (the person in front, whole) and still not for the
+    one behind; depths closer than ``depth_margin_m`` keep B15's rule."""
+    img, boxes = _front_and_back()
+    pos = {}
+    for name, depth in (("b15", None), ("depth", {1: 3.0, 2: 4.0}), ("level", {1: 3.0, 2: 3.2})):
+        bank = AppearanceBank(rng=5)
+        bank.train(img, boxes, train_ids=[1, 2], depth_m=depth)
+        pos[name] = {tid: bank.classifier(tid).reservoir(1) for tid in (1, 2)}
+    red_b15, red_depth = pos["b15"][1], pos["depth"][1]
+    # in front: the patches of its box that lie in blue's box are learnt, and they show red, as the image does
+    assert _wholly(red_depth, RED).sum() >= 1.3 * _wholly(red_b15, RED).sum()  # (a third of its box: 88 vs 60)
+    assert not _wholly(red_depth, BLUE).any()
+    # behind: no patch centred in red's box is learnt as blue (a wholly red patch would be one)
+    assert not _wholly(pos["depth"][2], RED).any()
+    assert _wholly(pos["depth"][2], BLUE).any()
+    # 0.2 m apart (margin 0.3 m): either may be in front, B15's rule
+    for tid in (1, 2):
+        assert np.array_equal(pos["level"][tid], pos["b15"][tid])
+
+
+def test_a_frozen_classifier_votes_as_it_was_while_the_live_one_learns_on():
+    """:meth:`AppearanceBank.freeze`: scoring with ``frozen=True`` uses the copy, whatever the classifier learns
+    after; :meth:`~AppearanceBank.restore` undoes that learning, :meth:`~AppearanceBank.thaw` and
+    :meth:`~AppearanceBank.drop` forget the copy."""
+    bank, rng = _train_red_blue()
+    test_img = _scene(np.random.default_rng(9), BOXES, {1: RED, 2: BLUE})
+    boxes = np.array([BOXES[1], BOXES[2]], float)
+    bank.rng = np.random.default_rng(3)
+    before = bank.box_scores(test_img, boxes, [1, 2])
+    bank.freeze(1)
+    assert bank.is_frozen(1)
+    assert not bank.is_frozen(2)
+    assert bank.frozen_ids == (1,)
+    for _ in range(12):  # the laser exchanged them: target 1's box now shows blue, and it learns blue
+        bank.train(_scene(rng, BOXES, {1: BLUE, 2: RED}), BOXES, train_ids=[1], force_update=True)
+    bank.rng = np.random.default_rng(3)
+    frozen = bank.box_scores(test_img, boxes, [1, 2], frozen=True)
+    bank.rng = np.random.default_rng(3)
+    live = bank.box_scores(test_img, boxes, [1, 2])
+    assert np.array_equal(frozen, before)
+    assert live[1, 0] > live[0, 0]  # the live classifier of 1 now prefers blue's box
+    assert frozen[0, 0] > 0.5 > -0.5 > frozen[1, 0]  # its frozen copy still knows red
+    bank.restore(1)
+    bank.rng = np.random.default_rng(3)
+    assert np.array_equal(bank.box_scores(test_img, boxes, [1, 2]), before)
+    assert bank.is_frozen(1)
+    bank.thaw(1)
+    assert not bank.is_frozen(1)
+    with pytest.raises(ValueError, match="no frozen classifier"):
+        bank.restore(1)
+    bank.freeze(2)
+    bank.drop(2)
+    assert bank.frozen_ids == ()

@@ -32,6 +32,7 @@ that has not been trained yet). Identity from one box alone compares differently
 
 from __future__ import annotations
 
+import copy
 import logging
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
@@ -502,6 +503,11 @@ class AppearanceParams:
     min_foreground : float
         When a foreground mask is given, a box patch needs at least this fraction of foreground pixels to be
         learnt or scored (0.5) [RECON: keeps the floor seen through a box out of both classes].
+    depth_margin_m : float
+        When the targets' distances from the camera are given (``depth_m``), a patch centred where two boxes
+        overlap shows the nearer target if it is at least this much nearer: it is kept for that one and dropped
+        for the other; closer in depth than this, it is dropped for both, as B15 drops every such patch
+        (0.3 m, about a body's depth) [RECON, extends B15].
     """
 
     patches: PatchParams = field(default_factory=PatchParams)
@@ -518,6 +524,7 @@ class AppearanceParams:
     map_eps: float = 1e-3
     min_score: float = 0.0
     min_foreground: float = 0.5
+    depth_margin_m: float = 0.3
 
     def __post_init__(self) -> None:
         for name, kind in (("patches", PatchParams), ("features", FeatureParams), ("boost", BoostParams)):
@@ -539,6 +546,9 @@ class AppearanceParams:
         if not 0 <= self.min_foreground <= 1:
             raise ValueError(f"AppearanceParams.min_foreground: expected a fraction in [0, 1], got "
                              f"{self.min_foreground!r}")
+        if not (np.isfinite(self.depth_margin_m) and self.depth_margin_m >= 0):
+            raise ValueError(f"AppearanceParams.depth_margin_m: expected a finite distance >= 0, got "
+                             f"{self.depth_margin_m!r}")
         if not -1 <= self.min_score <= 1:
             raise ValueError(f"AppearanceParams.min_score: expected a confidence in [-1, 1], got {self.min_score!r}")
 
@@ -839,6 +849,20 @@ def _inside(points: np.ndarray, boxes: np.ndarray) -> np.ndarray:
     return ((boxes[None, :, :2] <= p) & (p < boxes[None, :, 2:])).all(axis=2)
 
 
+def _hidden(points: np.ndarray, owner: np.ndarray, boxes: np.ndarray, depth: np.ndarray | None,
+            margin: float) -> np.ndarray:
+    """``(n_points,)`` bool: which patch centres ``points`` of box ``owner`` may show another target, being
+    inside another box: any other box (B15), or with the targets' distances from the camera ``depth`` (NaN where
+    unknown), another box whose target is not at least ``margin`` farther than the owner (it may be in front)."""
+    inside = _inside(points, boxes)
+    inside[np.arange(len(owner)), owner] = False
+    if depth is not None:
+        d = np.asarray(depth, np.float64)
+        behind = d[None, :] - d[owner][:, None] >= margin  # NaN compares False: such a box may be in front
+        inside &= ~behind
+    return inside.any(axis=1)
+
+
 # --------------------------------------------------------------------------------------------------
 # the bank
 class AppearanceBank:
@@ -856,6 +880,7 @@ class AppearanceBank:
         self.params = params or AppearanceParams()
         self.rng = np.random.default_rng(rng)
         self._targets: dict[int, AppearanceClassifier] = {}
+        self._frozen: dict[int, AppearanceClassifier] = {}  # :meth:`freeze`
         self._integrals: IntegralCache | None = None  # :meth:`cache_image`
 
     def cache_image(self, image: np.ndarray | None) -> None:
@@ -886,8 +911,10 @@ class AppearanceBank:
     def __contains__(self, target_id: object) -> bool:
         return target_id in self._targets
 
-    def classifier(self, target_id: int) -> AppearanceClassifier:
-        """The classifier of one target (``ValueError`` if unknown)."""
+    def classifier(self, target_id: int, frozen: bool = False) -> AppearanceClassifier:
+        """The classifier of one target (``ValueError`` if unknown); ``frozen``: its frozen copy if it has one."""
+        if frozen and int(target_id) in self._frozen:
+            return self._frozen[int(target_id)]
         try:
             return self._targets[int(target_id)]
         except KeyError as err:
@@ -897,9 +924,36 @@ class AppearanceBank:
         return target_id in self._targets and self._targets[target_id].is_trained
 
     def drop(self, target_ids: int | Iterable[int]) -> None:
-        """Forget targets (unknown ids are ignored)."""
+        """Forget targets (unknown ids are ignored), and their frozen copies."""
         for i in [target_ids] if isinstance(target_ids, int | np.integer) else list(target_ids):
             self._targets.pop(int(i), None)
+            self._frozen.pop(int(i), None)
+
+    # -- frozen copies --------------------------------------------------------------------------------
+    def freeze(self, target_id: int) -> None:
+        """Keep a copy of the target's classifier as it is now: scorings with ``frozen=True`` use it, while the
+        classifier itself goes on learning (a vote taken by the copy is not swayed by what was learnt since,
+        perhaps of the wrong person); replaces an earlier copy."""
+        self._frozen[int(target_id)] = copy.deepcopy(self.classifier(target_id))
+
+    @property
+    def frozen_ids(self) -> tuple[int, ...]:
+        return tuple(self._frozen)
+
+    def is_frozen(self, target_id: int) -> bool:
+        return int(target_id) in self._frozen
+
+    def thaw(self, target_id: int) -> None:
+        """Forget the target's frozen copy (if any)."""
+        self._frozen.pop(int(target_id), None)
+
+    def restore(self, target_id: int) -> None:
+        """Undo what the target learnt since it was frozen (it learnt the wrong person): the classifier becomes a
+        copy of the frozen one, which is kept."""
+        tid = int(target_id)
+        if tid not in self._frozen:
+            raise ValueError(f"restore: target {tid} has no frozen classifier")
+        self._targets[tid] = copy.deepcopy(self._frozen[tid])
 
     # -- training (B15) -----------------------------------------------------------------------------
     def samples_from(self, boxes_px: np.ndarray, image_shape: tuple[int, ...]) -> np.ndarray:
@@ -910,7 +964,8 @@ class AppearanceBank:
 
     def train(self, image: Any, boxes_by_id: Mapping[int, Sequence[float] | np.ndarray],
               train_ids: Iterable[int] | None = None, positions_m: Mapping[int, Sequence[float]] | None = None,
-              mask: np.ndarray | None = None, force_update: bool = False) -> list[int]:
+              mask: np.ndarray | None = None, force_update: bool = False,
+              depth_m: Mapping[int, float] | None = None) -> list[int]:
         """Add one frame of samples for the training targets and update those B15 says are due.
 
         Parameters
@@ -929,6 +984,10 @@ class AppearanceBank:
             ``min_foreground`` of their pixels set are not learnt, for positives and negatives alike.
         force_update : bool
             Update every training target that has samples of both classes now, whatever the cadence.
+        depth_m : mapping id -> m, optional
+            Each target's distance from the camera (for a tracked person, from the camera's floor point to the
+            person's): where boxes overlap, a patch is kept for the target at least ``depth_margin_m`` nearer
+            than the others there (it is in front) instead of being dropped for all.
 
         Returns
         -------
@@ -938,7 +997,8 @@ class AppearanceBank:
         Notes
         -----
         A box less than ``min_visible`` inside the image (or off it) gives no samples and is skipped. A patch
-        whose centre lies in another target's box is dropped (B15), for positives and negatives alike.
+        whose centre lies in another target's box is dropped (B15), for positives and negatives alike, unless
+        ``depth_m`` puts its own target in front of that one.
         Targets without a negative this frame (no visible confuser and no background patches) queue their
         positives only; the update waits for both classes.
         """
@@ -960,9 +1020,9 @@ class AppearanceBank:
         patches = sample_patches(boxes[rows], img.shape, p.patches, self.rng) if len(rows) else \
             Patches(np.zeros((0, 2), np.int64), np.zeros(0, np.int64), p.patches.size_px)
         owner = rows[patches.box_index]  # index into ids
-        inside = _inside(patches.centres_px, boxes)
-        inside[np.arange(len(owner)), owner] = False
-        keep = ~inside.any(axis=1)  # B15: no patch centred in another target's box
+        depth = self._depths(ids, depth_m)
+        # B15: no patch centred in another target's box (unless the depths put its own target in front)
+        keep = ~_hidden(patches.centres_px, owner, boxes, depth, p.depth_margin_m)
         if mask is not None:
             keep &= self._on_mask(mask, img.shape, patches)
         patches, owner = patches.subset(keep), owner[keep]
@@ -1039,6 +1099,16 @@ class AppearanceBank:
         return patch_fraction(m, patches) >= self.params.min_foreground
 
     @staticmethod
+    def _depths(ids: Sequence[int], depth_m: Mapping[int, float] | None) -> np.ndarray | None:
+        """``(len(ids),)`` distances from the camera (NaN where unknown) of ``depth_m``; None without any."""
+        if depth_m is None:
+            return None
+        d = np.array([float(depth_m.get(i, np.nan)) for i in ids])
+        if np.isinf(d).any() or (d < 0).any():
+            raise ValueError("depth_m: expected distances >= 0 (NaN where unknown)")
+        return d
+
+    @staticmethod
     def _positions(ids: list[int], boxes: np.ndarray, positions_m: Mapping[int, Sequence[float]] | None) -> np.ndarray:
         if positions_m is None:
             return np.column_stack([(boxes[:, 0] + boxes[:, 2]) / 2, boxes[:, 3]])
@@ -1058,19 +1128,23 @@ class AppearanceBank:
             raise ValueError(f"ids: no classifier for targets {unknown} (known: {list(self._targets)})")
         return out
 
-    def confidences(self, features: np.ndarray, ids: Iterable[int] | None = None) -> np.ndarray:
-        """``conf_k`` of feature vectors: ``(n_ids, n)`` float64 in [−1, 1] (rows in the order of ``ids``)."""
+    def confidences(self, features: np.ndarray, ids: Iterable[int] | None = None, frozen: bool = False
+                    ) -> np.ndarray:
+        """``conf_k`` of feature vectors: ``(n_ids, n)`` float64 in [−1, 1] (rows in the order of ``ids``);
+        ``frozen``: by the frozen copies (:meth:`freeze`) where there are any."""
         rows = self._rows(ids)
         x = np.asarray(features, dtype=np.float64)
-        return np.stack([self._targets[i].confidence(x) for i in rows]) if rows else np.zeros((0, len(x)))
+        return np.stack([self.classifier(i, frozen).confidence(x) for i in rows]) if rows else np.zeros((0, len(x)))
 
-    def patch_scores(self, image: Any, patches: Patches, ids: Iterable[int] | None = None) -> np.ndarray:
+    def patch_scores(self, image: Any, patches: Patches, ids: Iterable[int] | None = None, frozen: bool = False
+                     ) -> np.ndarray:
         """``conf_k`` of given patches of an image: ``(n_ids, n_patches)``."""
         img = validate_image(image, "image")
-        return self.confidences(self._features(img, patches), ids)
+        return self.confidences(self._features(img, patches), ids, frozen)
 
     def box_scores(self, image: Any, boxes_px: np.ndarray, ids: Iterable[int] | None = None,
-                   mask: np.ndarray | None = None, exclusive: bool = False) -> np.ndarray:
+                   mask: np.ndarray | None = None, exclusive: bool = False,
+                   frozen: bool = False) -> np.ndarray:
         """Mean confidence of each target's classifier over B12 patches of each box (B17's ``score_jk``).
 
         Parameters
@@ -1084,6 +1158,8 @@ class AppearanceBank:
         exclusive : bool
             Drop the patches centred in another of the boxes (B15's rule for training samples, applied to
             scoring: where two boxes overlap, a patch may show either person).
+        frozen : bool
+            Score with the targets' frozen copies (:meth:`freeze`) where they have one.
 
         Returns
         -------
@@ -1102,10 +1178,8 @@ class AppearanceBank:
         if mask is not None:
             patches = patches.subset(self._on_mask(mask, img.shape, patches))
         if exclusive and len(boxes) > 1:
-            inside = _inside(patches.centres_px, boxes)
-            inside[np.arange(len(patches)), vis[patches.box_index]] = False
-            patches = patches.subset(~inside.any(axis=1))
-        conf = self.patch_scores(img, patches, rows)  # (n_ids, n_patches)
+            patches = patches.subset(~_hidden(patches.centres_px, vis[patches.box_index], boxes, None, 0.0))
+        conf = self.patch_scores(img, patches, rows, frozen)  # (n_ids, n_patches)
         count = np.bincount(patches.box_index, minlength=len(vis)).astype(np.float64)
         onehot = np.zeros((len(vis), len(patches)))
         onehot[patches.box_index, np.arange(len(patches))] = 1.0
