@@ -315,19 +315,38 @@ class _FakeBank:
         self.row_u = np.zeros(3)
         self.updates: dict[int, int] = {}  # classifier updates (B14) per id; 2 when not given
         self.scale = 1.0  # confidence of every score (weak classifiers: below 1)
+        self.frozen: dict[int, int] = {}
 
     def is_trained(self, tid: int) -> bool:
         return tid in self.trained
 
-    def classifier(self, tid: int) -> Any:
+    def classifier(self, tid: int, frozen: bool = False) -> Any:
         return types.SimpleNamespace(n_updates=self.updates.get(tid, 2))
 
     def cache_image(self, image) -> None:  # (AppearanceBank's reuse of an image's integral images)
         pass
 
-    def box_scores(self, pixels, boxes, ids) -> np.ndarray:
+    # frozen copies (AppearanceBank.freeze, FusionParams.contact_learn_s): the row a copy prefers
+    @property
+    def frozen_ids(self) -> tuple[int, ...]:
+        return tuple(self.frozen)
+
+    def is_frozen(self, tid: int) -> bool:
+        return tid in self.frozen
+
+    def freeze(self, tid: int) -> None:
+        self.frozen[tid] = self.prefers[tid]
+
+    def thaw(self, tid: int) -> None:
+        self.frozen.pop(tid, None)
+
+    def restore(self, tid: int) -> None:
+        self.prefers[tid] = self.frozen[tid]
+
+    def box_scores(self, pixels, boxes, ids, frozen: bool = False, **_: Any) -> np.ndarray:
         rows = np.argmin(np.abs(0.5 * (boxes[:, :1] + boxes[:, 2:3]) - self.row_u[None]), axis=1)
-        return self.scale * np.array([[1.0 if self.prefers[tid] == r else -1.0 for tid in ids] for r in rows])
+        pref = {tid: self.frozen.get(tid, self.prefers[tid]) if frozen else self.prefers[tid] for tid in ids}
+        return self.scale * np.array([[1.0 if pref[tid] == r else -1.0 for tid in ids] for r in rows])
 
 
 class _Frames:
@@ -394,6 +413,41 @@ def test_two_exchanges_sharing_a_track_in_one_step_return_the_laser_trackers_ids
     final = relabel_states(raw, [dataclasses.replace(r, from_ns=t, to_ns=t + 1) for r in trk.relabels])
     assert [s.track_id for s in final] == laser.ids
     assert [(r.a, r.b) for r in trk.relabels] == laser.calls
+
+
+def test_a_check_votes_with_the_classifiers_frozen_at_the_contact_and_its_exchange_undoes_their_learning():
+    """``contact_learn_s``: classifiers learn on while their pair's check is open. The laser exchanged tracks 1 and
+    2 at the contact, and since then each classifier has learnt the person its track follows, the other one: it
+    would vouch for the exchanged identities. The check votes with the copies frozen when it opened: it exchanges
+    the two back, and both classifiers are restored to those copies (what they learnt since was of the other
+    person)."""
+    laser = _FakeLaser()
+    bank = _FakeBank({1: 0, 2: 1, 3: 2}, {1, 2, 3})
+    frames = _Frames(set())  # no image at the contact
+    trk = _three_people(laser, bank, frames, contact_learn_s=0.4)
+    t = 1_000_000_000
+    trk._check_identities(t, _step_states(trk, t))
+    assert set(trk._checks) == {(1, 2), (2, 3)}
+    assert bank.frozen == {1: 0, 2: 1, 3: 2}  # every voter's copy, as it was at the contact
+    laser.ids = [2, 1, 3]  # the laser had exchanged 1 and 2
+    bank.prefers.update({1: 1, 2: 0})  # and they learnt their tracks' people
+    t2 = t + 40_000_000
+    frames.times.add(t2)
+    out = trk._check_identities(t2, _step_states(trk, t2))
+    assert trk.stats.exchanges == 1
+    assert laser.ids == [1, 2, 3] == [s.track_id for s in out]
+    assert bank.prefers == {1: 0, 2: 1, 3: 2}  # restored
+    # the same with B15's rule (no frozen copies; the voters do not learn, here they did): no exchange
+    laser, bank = _FakeLaser(), _FakeBank({1: 0, 2: 1, 3: 2}, {1, 2, 3})
+    frames = _Frames(set())
+    trk = _three_people(laser, bank, frames)
+    trk._check_identities(t, _step_states(trk, t))
+    assert bank.frozen == {}
+    laser.ids = [2, 1, 3]
+    bank.prefers.update({1: 1, 2: 0})
+    frames.times.add(t2)
+    trk._check_identities(t2, _step_states(trk, t2))
+    assert trk.stats.exchanges == 0
 
 
 def test_an_exchange_redates_the_other_checks_of_its_tracks():

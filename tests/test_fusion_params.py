@@ -15,6 +15,7 @@ from fusiontrack.fusion import FusionParams
 @pytest.mark.parametrize("params", [
     FusionParams(),
     FusionParams(score_map=False, split_identity=True, check_margin=0.4, learn_all_s=1.5, reid_min_alone=None),
+    FusionParams(depth_order=False, contact_learn_s=0.4),
 ])
 def test_a_table_written_from_the_params_reads_back_the_same(params):
     # asdict nests the appearance options (patches, features, boost) as a TOML file would
@@ -38,6 +39,10 @@ def test_nested_appearance_options_reach_the_classifiers():
     ({"check_voters": True}, "check_voters"),
     ({"check_voters": 2.0}, "check_voters"),  # an integer, as check_min_updates
     ({"reid_min": 2.0}, "reid_min"),
+    ({"contact_learn_s": 0}, "contact_learn_s"),
+    ({"contact_learn_s": True}, "contact_learn_s"),
+    ({"depth_order": 1}, "depth_order"),
+    ({"appearance": {"depth_margin_m": -0.1}}, "depth_margin_m"),
     ({"appearance": 3}, "appearance"),
     ({"appearance": {"patches": {"size_px": 7}}}, "size_px"),
     ({"appearance": {"n_trees": 5}}, "n_trees"),
