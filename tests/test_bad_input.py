@@ -758,3 +758,21 @@ def test_a_simulation_stopped_by_sigterm_leaves_nothing(tmp_path):
     assert proc.returncode != 0
     assert "incomplete recording" in err
     assert not out.exists()
+
+
+def test_a_scan_header_corrupted_beyond_float32_reads_without_numpy_warnings():
+    """Flipped bytes in a scan's header can make its angle increment huge: it is held as float32 (inf), as ROS
+    holds it, and no beam has a direction (all invalid), without a bare numpy RuntimeWarning on the way."""
+    import warnings
+
+    from fusiontrack.geometry import scan_to_points
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        scan = LaserScan(1, "laser", "laser", -1.0, 1e39, 0.02, 5.0, np.ones(21))
+        assert scan.angle_increment_rad == np.inf
+        assert np.isnan(scan.angles_rad()).all()
+        assert np.isnan(scan.valid_ranges_m()).all()
+        assert np.isnan(scan_to_points(scan)).all()
+        scan = LaserScan(1, "laser", "laser", float("nan"), 0.01, 0.02, 5.0, np.ones(21))
+        assert np.isnan(scan.valid_ranges_m()).all()

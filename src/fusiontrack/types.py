@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import itertools
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -162,7 +163,8 @@ class LaserScan:
             _set(self, "angle_max_rad", self.angle_min_rad + (ranges.size - 1) * self.angle_increment_rad)
         # sensor_msgs/LaserScan stores these as float32: hold exactly what a recording can hold
         # (one array conversion for all seven: this runs once per scan on the read path).
-        values = np.array([getattr(self, name) for name in self._FLOAT32_FIELDS], np.float32).tolist()
+        with np.errstate(over="ignore"):  # a corrupted header beyond float32's range reads as inf, as ROS would hold it
+            values = np.array([getattr(self, name) for name in self._FLOAT32_FIELDS], np.float32).tolist()
         for name, value in zip(self._FLOAT32_FIELDS, values, strict=True):
             _set(self, name, value)
 
@@ -171,12 +173,18 @@ class LaserScan:
         return int(self.ranges_m.size)
 
     def angles_rad(self) -> np.ndarray:
-        """Beam angles, ``(n_beams,) float64``."""
+        """Beam angles, ``(n_beams,) float64``; NaN for every beam of a header whose angles are not finite (a
+        corrupted message)."""
+        if not (math.isfinite(self.angle_min_rad) and math.isfinite(self.angle_increment_rad)):
+            return np.full(self.n_beams, np.nan)
         return self.angle_min_rad + np.arange(self.n_beams) * self.angle_increment_rad
 
     def valid_ranges_m(self) -> np.ndarray:
-        """Ranges as float64 with every invalid reading replaced by ``NaN``, ``(n_beams,)``."""
+        """Ranges as float64 with every invalid reading replaced by ``NaN``, ``(n_beams,)``; all of them when the
+        header's angles are not finite (a corrupted message: no beam has a direction)."""
         r = self.ranges_m.astype(np.float64)
+        if not (math.isfinite(self.angle_min_rad) and math.isfinite(self.angle_increment_rad)):
+            return np.full_like(r, np.nan)
         with np.errstate(invalid="ignore"):
             bad = ~np.isfinite(r) | (r <= self.range_min_m) | (r >= self.range_max_m)
         r[bad] = np.nan
