@@ -306,13 +306,9 @@ def _check_laser_tables(cfg: Any, config: Path | None, tracker_kind: str) -> Non
         check_detector_params(cfg.laser, f"{where}[laser]")
     if tracker_kind == "any":  # a [tracking] table for either tracker; suiting neither, the error of the one
         # whose keys it uses (the Kalman's when it knows them all, else the particle filter's, the default)
-        try:
-            _check_laser_tables(cfg, config, "kalman")
-            return
-        except ConfigError as err:
-            if "unknown" not in str(err):
-                raise
-            tracker_kind = "pf"
+        from .tracking.online import kalman_keys
+
+        tracker_kind = "kalman" if cfg.tracking and set(cfg.tracking) <= kalman_keys() else "pf"
     if cfg.tracking and tracker_kind == "pf":
         from .tracking.tracker import TrackerParams
 

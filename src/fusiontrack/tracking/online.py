@@ -186,6 +186,13 @@ class OnlineLaserTracker:
         return states
 
 
+def kalman_keys() -> set[str]:
+    """The ``[tracking]`` keys the CV Kalman baseline (``--tracker kalman``) takes."""
+    from .baseline import CVKalmanTracker
+
+    return set(inspect.signature(CVKalmanTracker).parameters) - {"area_m", "ids"}
+
+
 def make_tracker(tracker: str, params: Any, area_m: Any, rng: np.random.Generator | int | None) -> Any:
     """:class:`~fusiontrack.tracking.LaserPeopleTracker` (``"pf"``) or the CV Kalman baseline (``"kalman"``)
     over ``area_m`` (``"auto"``: none yet; the caller sets it from the backgrounds)."""
@@ -200,7 +207,7 @@ def make_tracker(tracker: str, params: Any, area_m: Any, rng: np.random.Generato
     if tracker == "pf":
         return LaserPeopleTracker(params, area_m=area, rng=rng)
     kw = dict(params or {})
-    allowed = set(inspect.signature(CVKalmanTracker).parameters) - {"area_m", "ids"}
+    allowed = kalman_keys()
     unknown = sorted(set(kw) - allowed)
     if unknown:  # e.g. a pipeline file's [tracking] table written for the particle filter
         raise ConfigError(f"unknown CV Kalman parameter(s) {unknown} (the particle filter's?); the Kalman baseline "
