@@ -117,11 +117,11 @@ def imu_time_order(where: str, t_ns: np.ndarray) -> np.ndarray:
     order more than that is sorted; then a first or last message stamped far from all the others is dropped. Sorted
     as they came, one message stamped 100 s ahead stretched the phone's trajectory to 100 s."""
     from ..io.csvtable import MAX_BAD_ROW_SHARE
-    from ..io.imu_csv import _longest_in_order, _stray_ends
+    from ..io.imu_csv import longest_in_order, stray_ends
 
     t = np.asarray(t_ns, np.int64)
     if t.size and np.any(np.diff(t) < 0):
-        keep = _longest_in_order(t)
+        keep = longest_in_order(t)
         n_drop = int(np.count_nonzero(~keep))
         if n_drop <= max(1, int(MAX_BAD_ROW_SHARE * t.size)):
             log.warning("%s: dropped %d IMU message(s) stamped out of order (ahead of or behind their neighbours; "
@@ -132,7 +132,7 @@ def imu_time_order(where: str, t_ns: np.ndarray) -> np.ndarray:
             idx = np.argsort(t, kind="stable")
     else:
         idx = np.arange(t.size)
-    keep = _stray_ends(where, t[idx], idx + 1, np.ones(idx.size, bool), unit="message")
+    keep = stray_ends(where, t[idx], idx + 1, np.ones(idx.size, bool), unit="message")
     return idx[keep]
 
 

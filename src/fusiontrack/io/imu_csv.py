@@ -65,7 +65,9 @@ __all__ = [
     "IMU_CSV_FORMATS",
     "ImuCsv",
     "detect_imu_csv_format",
+    "longest_in_order",
     "read_imu_csv",
+    "stray_ends",
 ]
 
 logger = logging.getLogger(__name__)
@@ -74,7 +76,7 @@ IMU_CSV_FORMATS = ("oxford_validation", "oxford_optimisation", "generic")
 """The values ``format=`` accepts besides ``"auto"``."""
 
 
-def _longest_in_order(t_ns: np.ndarray) -> np.ndarray:
+def longest_in_order(t_ns: np.ndarray) -> np.ndarray:
     """Mask of a longest non-decreasing subsequence of ``t_ns``: the fewest rows to drop to put the stamps in order
     (one row stamped ahead costs itself, not the rows after it). Patience sorting, O(n log n); run only when some
     stamp goes back."""
@@ -108,7 +110,7 @@ def _check_time_order(path: Path, t_ns: np.ndarray, line_numbers: np.ndarray) ->
     back = np.flatnonzero(np.diff(t_ns) < 0)
     if not back.size:
         return np.ones(t_ns.size, dtype=bool)
-    keep = _longest_in_order(t_ns)
+    keep = longest_in_order(t_ns)
     drop = np.flatnonzero(~keep)
     if drop.size > max(1, int(MAX_BAD_ROW_SHARE * t_ns.size)):
         i = int(back[0]) + 1
@@ -126,8 +128,8 @@ STRAY_GAP_S = 1.0
 """A first or last sample this far (or 100 sampling intervals, if longer) from the rest of the log is dropped."""
 
 
-def _stray_ends(path: Path | str, t_ns: np.ndarray, line_numbers: np.ndarray, keep: np.ndarray,
-                unit: str = "line") -> np.ndarray:
+def stray_ends(path: Path | str, t_ns: np.ndarray, line_numbers: np.ndarray, keep: np.ndarray,
+               unit: str = "line") -> np.ndarray:
     """``keep`` without a first or last sample stamped far from all the others (a clock glitch at the start or end
     of a log: one row stamped ahead as the phone stopped writing, or one far back): in time order, so nothing else
     marks it, and it would stretch the log's span (``info``, trajectories) by the gap. Dropped with a warning; a log
@@ -308,7 +310,7 @@ def _read_validation(path: Path, sensor: str, frame_id: str) -> ImuCsv:
     table = read_numeric_table(path, n_cols=7, int_cols=(0,), what=_VALIDATION_COLS, skip_bad_rows=True)
     table = _keep(table, _finite_rows(path, table.values[:, 1:4], table.line_numbers, "acceleration"))
     order = _check_time_order(path, table.ints[0], table.line_numbers)
-    table = _keep(table, _stray_ends(path, table.ints[0], table.line_numbers, order))
+    table = _keep(table, stray_ends(path, table.ints[0], table.line_numbers, order))
     t_ns = table.ints[0]
     app, gt, hw = (_int_column(path, table, c, name) for c, name in
                    ((4, "steps_by_app"), (5, "steps_by_ground_truth"), (6, "steps_by_hw")))
@@ -323,7 +325,7 @@ def _read_optimisation(path: Path, sensor: str, frame_id: str) -> ImuCsv:
     table = read_numeric_table(accel_path, n_cols=5, int_cols=(0,), what=_ACCEL_COLS, skip_bad_rows=True)
     table = _keep(table, _finite_rows(accel_path, table.values[:, 2:5], table.line_numbers, "acceleration"))
     order = _check_time_order(accel_path, table.ints[0], table.line_numbers)
-    table = _keep(table, _stray_ends(accel_path, table.ints[0], table.line_numbers, order))
+    table = _keep(table, stray_ends(accel_path, table.ints[0], table.line_numbers, order))
     t_ns = table.ints[0]
     kinds = np.unique(table.values[:, 1])
     if kinds.size > 1:
@@ -377,7 +379,7 @@ def _read_generic(path: Path, sensor: str, frame_id: str) -> ImuCsv:
             raise RecordingError(f"{path}: t_s reaches {np.abs(t).max():.6g}, which is milliseconds (or finer), "
                                  f"not seconds: name the column t_ms (or t_ns)")
         t_ns = np.rint(t * (1e6 if name == "t_ms" else 1e9)).astype(np.int64)
-    keep = _stray_ends(path, t_ns, table.line_numbers, _check_time_order(path, t_ns, table.line_numbers))
+    keep = stray_ends(path, t_ns, table.line_numbers, _check_time_order(path, t_ns, table.line_numbers))
     table, t_ns = _keep(table, keep), t_ns[keep]
     step_s = float(np.median(np.diff(t_ns))) / 1e9 if t_ns.size >= 2 else 0.0
     if step_s > _MAX_SAMPLE_STEP_S:  # a phone's IMU samples at 10-500 Hz: a wrong unit, not a slow sensor
