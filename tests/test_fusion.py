@@ -424,7 +424,7 @@ def test_a_check_votes_with_the_classifiers_frozen_at_the_contact_and_its_exchan
     laser = _FakeLaser()
     bank = _FakeBank({1: 0, 2: 1, 3: 2}, {1, 2, 3})
     frames = _Frames(set())  # no image at the contact
-    trk = _three_people(laser, bank, frames, contact_learn_s=0.4)
+    trk = _three_people(laser, bank, frames, contact_learn_s=0.4)  # (the default)
     t = 1_000_000_000
     trk._check_identities(t, _step_states(trk, t))
     assert set(trk._checks) == {(1, 2), (2, 3)}
@@ -437,10 +437,11 @@ def test_a_check_votes_with_the_classifiers_frozen_at_the_contact_and_its_exchan
     assert trk.stats.exchanges == 1
     assert laser.ids == [1, 2, 3] == [s.track_id for s in out]
     assert bank.prefers == {1: 0, 2: 1, 3: 2}  # restored
-    # the same with B15's rule (no frozen copies; the voters do not learn, here they did): no exchange
+    # the same with B15's rule (contact_learn_s None: no frozen copies; the voters do not learn, here they did):
+    # no exchange
     laser, bank = _FakeLaser(), _FakeBank({1: 0, 2: 1, 3: 2}, {1, 2, 3})
     frames = _Frames(set())
-    trk = _three_people(laser, bank, frames)
+    trk = _three_people(laser, bank, frames, contact_learn_s=None)
     trk._check_identities(t, _step_states(trk, t))
     assert bank.frozen == {}
     laser.ids = [2, 1, 3]

@@ -15,11 +15,20 @@ from fusiontrack.fusion import FusionParams
 @pytest.mark.parametrize("params", [
     FusionParams(),
     FusionParams(score_map=False, split_identity=True, check_margin=0.4, learn_all_s=1.5, reid_min_alone=None),
-    FusionParams(depth_order=False, contact_learn_s=0.4),
+    FusionParams(depth_order=False, contact_learn_s=None),
 ])
 def test_a_table_written_from_the_params_reads_back_the_same(params):
     # asdict nests the appearance options (patches, features, boost) as a TOML file would
     assert FusionParams.from_mapping(dataclasses.asdict(params)) == params
+
+
+def test_false_turns_off_an_option_that_none_turns_off():
+    """TOML has no null: ``contact_learn_s = false`` is None (B15's learning as seed 001 words it); ``true`` is
+    not a number."""
+    assert FusionParams.from_mapping({"contact_learn_s": False}).contact_learn_s is None
+    assert FusionParams.from_mapping({"learn_all_s": False}).learn_all_s is None
+    with pytest.raises(ConfigError, match="contact_learn_s"):
+        FusionParams.from_mapping({"contact_learn_s": True})
 
 
 def test_nested_appearance_options_reach_the_classifiers():

@@ -50,9 +50,10 @@
    the camera image nearest in time: positives from its projected box (B11), negatives from the boxes of
    its ``L`` closest targets (patches centred in another box are dropped, unless the laser puts the box's own
    target in front: ``FusionParams.depth_order``); at most once every
-   ``train_interval_s``; merged targets' classifiers are frozen, and so is a voter of a pending identity check
-   (its track could be following the other person; ``FusionParams.contact_learn_s``: it learns on, and the check
-   votes with a frozen copy). And (``FusionParams.learn_all_s``) the targets B15 never
+   ``train_interval_s``; merged targets' classifiers are frozen. B15 freezes correlated targets' classifiers too,
+   and a voter of a pending identity check (its track could be following the other person); here
+   (``FusionParams.contact_learn_s``) correlated targets learn at most every 0.4 s, voters learn on, and a check
+   votes with copies of its voters frozen when it opened. And (``FusionParams.learn_all_s``) the targets B15 never
    trains, nobody ever near them, learn alone now and then, for re-identification only.
 
 The camera image is converted only when one of these needs it (:class:`~fusiontrack.fusion.frames.LazyFrames`),
@@ -100,6 +101,7 @@ log = logging.getLogger(__name__)
 
 _LEARNING = (str(Situation.NONCORRELATED), str(Situation.APPEARING))
 _CORRELATED = str(Situation.CORRELATED)
+_OPTIONAL = ("learn_all_s", "reid_min_alone", "contact_learn_s")  # FusionParams numbers that None turns off
 
 
 class FrameSource(Protocol):
@@ -267,21 +269,22 @@ class FusionParams:
         22 / 23 -> 21 / 23 ID switches, IDF1 within 0.001; it is the rule ``contact_learn_s`` learns by, while
         people overlap.
     contact_learn_s : float or None
-        None (the default): B15 as seed 001 words it, only noncorrelated targets learn, and a voter of a pending
-        identity check does not (its track could be following the other person). A number [RECON, extends B15]:
-        correlated targets learn too (a trained one at most every ``contact_learn_s``), voters go on learning,
-        and a check votes with copies of its voters frozen when it opened
-        (:meth:`~fusiontrack.vision.appearance.AppearanceBank.freeze`), refreshed when the check keeps the
-        identities and none of the voter's other checks is undecided, and restored (what was learnt since
-        undone) when it exchanges them. People who walk together are correlated for most of their walk, and
-        their classifiers were frozen after one or two updates: on ``groups`` seed 0, five classifiers had 2-3
-        updates each over 8 s together. Off by default for its cost [RECON]: with 0.1 (every ``train_interval_s``)
-        on the same 72 runs, draws 0 / 1, groups 22 / 23 -> 19 / 19 ID switches and IDF1 0.970 / 0.967 -> 0.972 /
-        0.974, crowd 75 / 75 -> 76 / 72 and IDF1 0.958 / 0.955 -> 0.957 / 0.956; on ``benchmarks/fusion.py``
-        (seeds 0-2) no identity changes, the camera is read for 1305 images instead of 894 and trained on
-        1633 instead of 624, and the fused time per frame goes from 1.38x laser-only's to 1.60x (seed 001's
-        target: at most 1.5x). (Groups seed 0's exchange at 14.3 s is not repaired: the person behind is more
-        than 45 % hidden for the 7 s after it, and what shows of the two, their heads and tops, looks alike.)
+        People in contact learn on [RECON, extends B15]: correlated targets learn too (a trained one at most every
+        ``contact_learn_s``, 0.4), voters of a pending identity check go on learning, and a check votes with copies
+        of its voters frozen when it opened (:meth:`~fusiontrack.vision.appearance.AppearanceBank.freeze`),
+        refreshed when the check keeps the identities and none of the voter's other checks is undecided, and
+        restored (what was learnt since undone) when it exchanges them. None: B15 as seed 001 words it, only
+        noncorrelated targets learn, and a voter of a pending check does not (its track could be following the
+        other person). People who walk together are correlated for most of their walk, and B15 froze their
+        classifiers after one or two updates: on ``groups`` seed 0, five classifiers had 2-3 updates each over 8 s
+        together. On 72 simulated runs (crowd and groups, seeds 0-35, 30 s), particle-filter draws 0 / 1, against
+        None: groups 22 / 23 -> 19 / 19 ID switches and IDF1 0.970 / 0.967 -> 0.972 / 0.975, crowd 75 / 75 -> 74 /
+        73 and IDF1 0.958 / 0.955 -> 0.958 / 0.956 (0.1: groups 19 / 19, crowd 76 / 72). On
+        ``benchmarks/fusion.py`` (seeds 0-2) no identity changes; the camera is read for 1108 images instead of 894
+        and trained on 1074 instead of 624, and the fused time per frame goes from 1.38x laser-only's to 1.48x
+        (0.1: 1.60x; seed 001's target: at most 1.5x). (Groups seed 0's exchange at 14.3 s is not repaired: the
+        person behind is more than 45 % hidden for the 7 s after it, and what shows of the two, their heads and
+        tops, looks alike.)
     appearance : AppearanceParams
         The classifiers (B12-B14).
     """
@@ -316,7 +319,7 @@ class FusionParams:
     width_ratio: float = 0.40
     max_frame_dt_s: float = 0.05
     depth_order: bool = True
-    contact_learn_s: float | None = None
+    contact_learn_s: float | None = 0.4
     appearance: AppearanceParams = field(default_factory=AppearanceParams)
 
     def __post_init__(self) -> None:
@@ -361,7 +364,8 @@ class FusionParams:
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], source: str = "fusion") -> FusionParams:
         """From a pipeline file's ``[fusion]`` table: field names as keys, ``appearance`` a nested table
-        (``patches``, ``features``, ``boost``, ... of :class:`~fusiontrack.vision.appearance.AppearanceParams`).
+        (``patches``, ``features``, ``boost``, ... of :class:`~fusiontrack.vision.appearance.AppearanceParams`);
+        ``false`` for an option that None turns off (``contact_learn_s``, ``learn_all_s``, ``reid_min_alone``).
 
         Raises
         ------
@@ -374,6 +378,9 @@ class FusionParams:
         bad = sorted(k for k in flags if k in vals and not isinstance(vals[k], bool))
         if bad:
             raise ConfigError(f"{source}: {bad[0]}: expected true or false, got {vals[bad[0]]!r}")
+        for name in _OPTIONAL:  # TOML has no null: false turns such an option off
+            if vals.get(name) is False:
+                vals[name] = None
         if "appearance" in vals:
             app = vals["appearance"]
             if not isinstance(app, Mapping):
