@@ -226,6 +226,15 @@ def _bias_clock(into: list[float], t0: float) -> Any:
     return wrap
 
 
+def _merge(into: dict[str, Any], table: dict[str, Any]) -> None:
+    """``table`` merged into ``into``, nested tables key by key (a later value wins)."""
+    for key, value in table.items():
+        if isinstance(value, dict) and isinstance(into.get(key), dict):
+            _merge(into[key], value)
+        else:
+            into[key] = value
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
@@ -246,14 +255,13 @@ def main() -> None:
     if args.repeat < 1:
         parser.error(f"--repeat: expected at least 1, got {args.repeat}")
     options: dict[str, Any] = {}
-    for item in args.fusion:
-        key, sep, value = item.partition("=")
+    for item in args.fusion:  # a line of a [fusion] table: dotted keys reach the nested ones (appearance.x=1)
+        if "=" not in item:
+            parser.error(f"--fusion {item}: expected KEY=VALUE")
         try:
-            options[key.strip()] = tomllib.loads(f"v = {value}")["v"]
+            _merge(options, tomllib.loads(item))
         except tomllib.TOMLDecodeError as err:
             parser.error(f"--fusion {item}: expected KEY=VALUE with a TOML value ({err})")
-        if not sep:
-            parser.error(f"--fusion {item}: expected KEY=VALUE")
     try:
         fusion = FusionParams.from_mapping(options, "--fusion") if options else None
     except ConfigError as err:
@@ -273,7 +281,7 @@ def main() -> None:
                         f"{args.groups_seconds:g} s; match 0.5 m; ms per 25 Hz frame; fusion "
                         f"{'through the camera as calibrated' if args.no_bias else 'with the adaptive bias'}"
                         f"{f'; rng {args.rng}' if args.rng else ''}"
-                        f"{'; ' + ', '.join(f'{k} = {v!r}' for k, v in options.items()) if options else ''})",
+                        f"{'; ' + ', '.join(args.fusion) if options else ''})",
                   header_style="bold")
     for col in ("scenario", "seed", "people", "system", "MOTA", "IDF1", "IDF1 ceiling", "HOTA", "IDSW",
                 "splits resolved",

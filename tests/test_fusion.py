@@ -343,6 +343,10 @@ class _FakeBank:
     def restore(self, tid: int) -> None:
         self.prefers[tid] = self.frozen[tid]
 
+    def drop(self, tid: int) -> None:
+        self.trained.discard(tid)
+        self.frozen.pop(tid, None)
+
     def box_scores(self, pixels, boxes, ids, frozen: bool = False, **_: Any) -> np.ndarray:
         rows = np.argmin(np.abs(0.5 * (boxes[:, :1] + boxes[:, 2:3]) - self.row_u[None]), axis=1)
         pref = {tid: self.frozen.get(tid, self.prefers[tid]) if frozen else self.prefers[tid] for tid in ids}
@@ -449,6 +453,39 @@ def test_a_check_votes_with_the_classifiers_frozen_at_the_contact_and_its_exchan
     frames.times.add(t2)
     trk._check_identities(t2, _step_states(trk, t2))
     assert trk.stats.exchanges == 0
+
+
+def test_a_withheld_exchange_undoes_the_voters_learning_and_a_classifier_trained_in_the_contact_is_dropped():
+    """``contact_learn_s``: (a) the check finds 1 and 2 exchanged but may not exchange them back (1's classifier
+    was fitted once, ``check_min_updates`` 2): what both learnt since the contact may be of the other person, and is
+    undone. (b) 2 had no classifier at the contact (it votes not) and was first trained during it; 1 alone may
+    exchange (``check_voters`` 1): at the exchange 1 is restored and 2's classifier, perhaps of either person, is
+    dropped."""
+    t, t2 = 1_000_000_000, 1_040_000_000
+    for case in ("withheld", "one voter"):
+        laser = _FakeLaser()
+        bank = _FakeBank({1: 0, 2: 1, 3: 2}, {1, 2, 3} if case == "withheld" else {1, 3})
+        if case == "withheld":
+            bank.updates = {1: 1}
+        frames = _Frames(set())
+        trk = _three_people(laser, bank, frames, contact_learn_s=0.4, check_voters=1 if case == "one voter" else 2)
+        trk._check_identities(t, _step_states(trk, t))
+        assert trk._checks[(1, 2)].voters == ({1, 2} if case == "withheld" else {1})
+        laser.ids = [2, 1, 3]  # the laser exchanged 1 and 2, and they learnt their tracks' people
+        bank.prefers.update({1: 1, 2: 0})
+        bank.trained.add(2)
+        frames.times.add(t2)
+        trk._check_identities(t2, _step_states(trk, t2))
+        if case == "withheld":
+            assert (trk.stats.exchanges, trk.stats.withheld) == (0, 1)
+            assert laser.ids == [2, 1, 3]
+            assert bank.prefers[1] == 0  # both restored
+            assert bank.prefers[2] == 1
+        else:
+            assert trk.stats.exchanges == 1
+            assert laser.ids == [1, 2, 3]
+            assert bank.prefers[1] == 0  # restored
+            assert not bank.is_trained(2)  # dropped: it learns afresh
 
 
 def test_an_exchange_redates_the_other_checks_of_its_tracks():

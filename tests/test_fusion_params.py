@@ -52,6 +52,9 @@ def test_nested_appearance_options_reach_the_classifiers():
     ({"contact_learn_s": True}, "contact_learn_s"),
     ({"depth_order": 1}, "depth_order"),
     ({"appearance": {"depth_margin_m": -0.1}}, "depth_margin_m"),
+    ({"appearance": {"depth_margin_m": 0}}, "depth_margin_m"),  # 0: each of two at one depth would be in front
+    ({"appearance": {"depth_margin_m": True}}, "depth_margin_m"),
+    ({"reid_min_alone": True}, "reid_min_alone"),  # not a confidence of 1
     ({"appearance": 3}, "appearance"),
     ({"appearance": {"patches": {"size_px": 7}}}, "size_px"),
     ({"appearance": {"n_trees": 5}}, "n_trees"),

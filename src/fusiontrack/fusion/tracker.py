@@ -273,7 +273,10 @@ class FusionParams:
         ``contact_learn_s``, 0.4), voters of a pending identity check go on learning, and a check votes with copies
         of its voters frozen when it opened (:meth:`~fusiontrack.vision.appearance.AppearanceBank.freeze`),
         refreshed when the check keeps the identities and none of the voter's other checks is undecided, and
-        restored (what was learnt since undone) when it exchanges them. None: B15 as seed 001 words it, only
+        restored (what was learnt since undone) when it finds them exchanged, whether it exchanges them back or
+        not (withheld); at an exchange, a classifier of the pair first trained during the contact is dropped.
+        Members of a merged target never learn (seen apart, they are correlated, where the tracker guesses
+        them). None: B15 as seed 001 words it, only
         noncorrelated targets learn, and a voter of a pending check does not (its track could be following the
         other person). People who walk together are correlated for most of their walk, and B15 froze their
         classifiers after one or two updates: on ``groups`` seed 0, five classifiers had 2-3 updates each over 8 s
@@ -355,6 +358,7 @@ class FusionParams:
         if v is not None and not (isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v) and v > 0):
             raise ConfigError(f"FusionParams.contact_learn_s: expected None or a finite value > 0, got {v!r}")
         if self.reid_min_alone is not None and not (isinstance(self.reid_min_alone, int | float)
+                                                    and not isinstance(self.reid_min_alone, bool)
                                                     and -1 <= self.reid_min_alone <= 1):
             raise ConfigError(f"FusionParams.reid_min_alone: expected None or a confidence in [-1, 1], got "
                               f"{self.reid_min_alone!r}")
@@ -1067,8 +1071,10 @@ class FusionTracker:
         contact = p.contact_learn_s
         waiting = set() if contact is not None else {tid for c in self._checks.values() for tid in c.voters}
         learning = _LEARNING if contact is None else (*_LEARNING, _CORRELATED)
+        # (a member of a merged target seen apart is correlated: its position is a guess until the split)
+        merged = self._merged_ids() if contact is not None else set()
         learners = [k for k, s in enumerate(states)
-                    if near[k] and s.situation in learning and s.sensors
+                    if near[k] and s.situation in learning and s.sensors and s.track_id not in merged
                     and (not self.bank.is_trained(s.track_id) or s.track_id in self._alone
                          or (t_ns - self._learnt_t.get(s.track_id, -(1 << 62))
                              >= (interval if s.situation != _CORRELATED else max(interval, contact * 1e9))
@@ -1233,9 +1239,10 @@ class FusionTracker:
                 # (a classifier that learnt alone, ``learn_all_s``, never saw a person near its own: no voter)
                 voters = frozenset(tid for tid in pair if self.bank.is_trained(tid) and tid not in self._alone)
                 checks[pair] = _Check(t_ns, dist, t_ns, voters)
-                if p.contact_learn_s is not None:  # the voters go on learning; their votes are the classifiers of now
+                if p.contact_learn_s is not None:  # the voters go on learning; their votes are the classifiers of
+                    # now (or of the opening of another check of theirs still undecided, which may hold the person)
                     for tid in voters:
-                        if not self.bank.is_frozen(tid):
+                        if not any(not o.decided for q, o in checks.items() if q != pair and tid in o.voters):
                             self.bank.freeze(tid)
                 continue
             if c.decided:  # a decided pair still or again in contact: checked again, by the same voters (a
@@ -1312,6 +1319,11 @@ class FusionTracker:
                         c.exchanged = True
                         exchanged.append(pair)
                         busy.update(pair)
+                    elif mean < 0:  # exchanged perhaps, but not exchanged back: what the voters learnt since the
+                        # contact may be of the other person
+                        for tid in c.voters:
+                            if self.bank.is_frozen(tid):
+                                self.bank.restore(tid)
         self.stats.camera_s += time.perf_counter() - t0
         for a, b in exchanged:  # in the order the laser tracker's ids were exchanged
             states = [dataclasses.replace(st, track_id=b if st.track_id == a else a)
@@ -1342,6 +1354,8 @@ class FusionTracker:
             self._claims.pop(tid, None)
             if self.bank.is_frozen(tid):  # what it learnt since its check opened was (partly) of the other person
                 self.bank.restore(tid)
+            elif self.params.contact_learn_s is not None and self.bank.is_trained(tid) and tid not in self._alone:
+                self.bank.drop(tid)  # first trained during the contact (not a voter): perhaps on either person
         self.relabels.append(Relabel(int(from_ns), int(t_ns), int(a), int(b)))
         self.stats.exchanges += 1
         self.events.append(Event(t_ns, self.camera_name, "identity", t_ns, track_ids=(a, b),

@@ -218,7 +218,7 @@ def label_points(points_m: np.ndarray, gt: Any) -> np.ndarray:
 
 def _scan_points(scan: Any, max_range_m: float = np.inf) -> np.ndarray:
     r = scan.valid_ranges_m()
-    a = scan.angle_min_rad + np.arange(r.size) * scan.angle_increment_rad
+    a = scan.angles_rad()
     ok = np.isfinite(r) & (r > 0) & (r <= max_range_m)
     return np.column_stack([r[ok] * np.cos(a[ok]), r[ok] * np.sin(a[ok])])
 

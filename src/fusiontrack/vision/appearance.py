@@ -546,8 +546,8 @@ class AppearanceParams:
         if not 0 <= self.min_foreground <= 1:
             raise ValueError(f"AppearanceParams.min_foreground: expected a fraction in [0, 1], got "
                              f"{self.min_foreground!r}")
-        if not (np.isfinite(self.depth_margin_m) and self.depth_margin_m >= 0):
-            raise ValueError(f"AppearanceParams.depth_margin_m: expected a finite distance >= 0, got "
+        if isinstance(self.depth_margin_m, bool) or not (np.isfinite(self.depth_margin_m) and self.depth_margin_m > 0):
+            raise ValueError(f"AppearanceParams.depth_margin_m: expected a finite distance > 0, got "
                              f"{self.depth_margin_m!r}")
         if not -1 <= self.min_score <= 1:
             raise ValueError(f"AppearanceParams.min_score: expected a confidence in [-1, 1], got {self.min_score!r}")
@@ -1272,6 +1272,7 @@ class AppearanceBank:
         """JSON-ready state: parameters, every target's classifier and the random generator's state (PCG64).
 
         ``samples=False`` leaves out the reservoirs and waiting samples (see :meth:`AppearanceClassifier.to_dict`).
+        Frozen copies (:meth:`freeze`) are not saved: a bank read back scores with its classifiers as they are.
         """
         bitgen = self.rng.bit_generator
         rng_state = bitgen.state if type(bitgen).__name__ == "PCG64" else None
