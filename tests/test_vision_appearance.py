@@ -696,7 +696,8 @@ def test_depth_order_learns_the_overlap_for_the_target_in_front():
         pos[name] = {tid: bank.classifier(tid).reservoir(1) for tid in (1, 2)}
     red_b15, red_depth = pos["b15"][1], pos["depth"][1]
     # in front: the patches of its box that lie in blue's box are learnt, and they show red, as the image does
-    assert _wholly(red_depth, RED).sum() >= 1.3 * _wholly(red_b15, RED).sum()  # (a third of its box: 88 vs 60)
+    # (39 % of its box overlaps blue's: 1.65x as many expected)
+    assert _wholly(red_depth, RED).sum() >= 1.3 * _wholly(red_b15, RED).sum()
     assert not _wholly(red_depth, BLUE).any()
     # behind: no patch centred in red's box is learnt as blue (a wholly red patch would be one)
     assert not _wholly(pos["depth"][2], RED).any()

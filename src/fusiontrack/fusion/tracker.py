@@ -1242,7 +1242,7 @@ class FusionTracker:
                 if p.contact_learn_s is not None:  # the voters go on learning; their votes are the classifiers of
                     # now (or of the opening of another check of theirs still undecided, which may hold the person)
                     for tid in voters:
-                        if not any(not o.decided for q, o in checks.items() if q != pair and tid in o.voters):
+                        if self._undecided_elsewhere(tid, pair) is None:
                             self.bank.freeze(tid)
                 continue
             if c.decided:  # a decided pair still or again in contact: checked again, by the same voters (a
@@ -1310,7 +1310,7 @@ class FusionTracker:
                     if mean > 0 and p.contact_learn_s is not None:  # kept: what the voters learnt since they were
                         # frozen was of their own people, unless a check of theirs with another track is undecided
                         for tid in c.voters:
-                            if all(o.decided for q, o in checks.items() if tid in q and tid in o.voters):
+                            if self._undecided_elsewhere(tid, pair) is None:
                                 self.bank.freeze(tid)
                     self.stats.checks += 1
                     reliable = mean >= 0 or self._reliable(voters)
@@ -1329,6 +1329,11 @@ class FusionTracker:
             states = [dataclasses.replace(st, track_id=b if st.track_id == a else a)
                       if st.track_id in (a, b) else st for st in states]
         return states
+
+    def _undecided_elsewhere(self, tid: int, pair: tuple[int, int]) -> tuple[int, int] | None:
+        """A pair other than ``pair`` whose check ``tid`` votes in and which is undecided (its vote is then the copy
+        frozen when that check opened: it is kept), or None."""
+        return next((q for q, o in self._checks.items() if q != pair and tid in o.voters and not o.decided), None)
 
     def _reliable(self, voters: Iterable[int]) -> bool:
         """Whether the classifiers of ``voters`` may exchange identities: there are at least ``check_voters``, and
