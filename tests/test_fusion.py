@@ -512,6 +512,26 @@ def test_an_exchange_redates_the_other_checks_of_its_tracks():
     assert (trk._checks[(2, 3)].swap_from_ns, trk._checks[(2, 3)].closest_m) == (t3, pytest.approx(0.5))
 
 
+@pytest.mark.parametrize("merged", [frozenset(), frozenset({1, 2})])
+def test_members_of_a_merged_target_never_learn_while_correlated_targets_do(merged, monkeypatch):
+    """``contact_learn_s``: three people stand 0.7 m apart, all correlated. Correlated targets learn, but the members
+    of a merged target seen apart are correlated too, at positions the laser tracker guesses until the split: their
+    boxes may hold either person, and they must not learn. Only the others do."""
+    from fusiontrack.types import TrackState
+
+    laser = _FakeLaser()
+    laser.merged_ids = merged
+    trk = _three_people(laser, _FakeBank({1: 0, 2: 1, 3: 2}, set()), _Frames(), contact_learn_s=0.4)
+    learnt: list[list[int]] = []
+    monkeypatch.setattr(trk, "_learn_near", lambda t, learners, pos, ids, d: learnt.append(
+        sorted(int(ids[k]) for k in learners)))
+    t = 1_000_000_000
+    states = [TrackState(t, "laser", tid, np.array([6.0, y]), np.zeros(2), situation="correlated",
+                         sensors=("laser",)) for tid, y in zip(laser.ids, ROWS_Y, strict=True)]
+    trk._learn(t, states)
+    assert learnt == [sorted({1, 2, 3} - merged)]
+
+
 def test_classifiers_fitted_once_keep_identities_but_do_not_exchange_them():
     """1 and 2 find their tracks on each other's boxes ("exchange"), but 1's classifier has been fitted only once
     (FusionParams.check_min_updates = 2): the check decides without exchanging; once 1's classifier has been
