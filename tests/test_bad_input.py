@@ -741,7 +741,8 @@ def test_a_recording_stopped_part_way_is_removed_not_left_looking_whole(tmp_path
 
 def test_a_simulation_stopped_by_sigterm_leaves_nothing(tmp_path):
     """kill (SIGTERM: a scheduler's stop) during simulate left a half-written recording, and the next run refused
-    the folder as existing; it now goes through Ctrl-C's clean-up: the incomplete recording is removed."""
+    the folder as existing; it now goes through Ctrl-C's clean-up: the incomplete recording is removed, and the run
+    exits with SIGTERM's code (it exited with Ctrl-C's, 130: a scheduler could not tell its stop from a user's)."""
     import signal
     import time
 
@@ -755,8 +756,9 @@ def test_a_simulation_stopped_by_sigterm_leaves_nothing(tmp_path):
     time.sleep(1.0)  # part way through
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode != 0
+    assert proc.returncode == 128 + signal.SIGTERM  # the shell's code for a run stopped by SIGTERM (Ctrl-C's: 130)
     assert "incomplete recording" in err
+    assert "terminated" in err
     assert not out.exists()
 
 

@@ -1766,11 +1766,16 @@ def os_error_line(err: OSError) -> str:
     return f"cannot write {file.name}: {reason}" if file is not None else reason
 
 
+_TERMINATED: list[int] = []  # the signals that stopped the run (SIGTERM)
+
+
 def _terminated(signum: int, frame: Any) -> None:
     """SIGTERM (a job scheduler's stop, ``kill``) stops a run as Ctrl-C does, through the same clean-up: a recording
     being written is removed, a video being written leaves the earlier one (a stopped simulate left a half folder
-    that the next run refused as existing)."""
-    raise KeyboardInterrupt  # (exit code 130, as for Ctrl-C)
+    that the next run refused as existing). The exit code is the shell's for SIGTERM, 143 (Ctrl-C's: 130), so that a
+    scheduler or script sees which stopped the run."""
+    _TERMINATED.append(signum)
+    raise KeyboardInterrupt  # (typer turns it into exit code 130: main() makes that 143)
 
 
 def main() -> None:
@@ -1793,7 +1798,12 @@ def main() -> None:
         sys.exit(2)
     except KeyboardInterrupt:
         err_console.print("interrupted")
-        sys.exit(130)
+        sys.exit(128 + _TERMINATED[0] if _TERMINATED else 130)
+    except SystemExit as err:
+        if _TERMINATED and err.code == 130:  # (typer's exit for a KeyboardInterrupt)
+            err_console.print("terminated")
+            sys.exit(128 + _TERMINATED[0])
+        raise
 
 
 if __name__ == "__main__":
