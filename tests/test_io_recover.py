@@ -119,6 +119,39 @@ def test_corrupt_record_stops_the_scan_there(demo, tmp_path):
     assert _ros1_messages(tmp_path / "bad_fixed.bag") == demo["messages"][:k]
 
 
+@pytest.mark.parametrize("damage", ["type=", "message_definition="])
+def test_damaged_connection_record_of_a_closed_bag_is_read_from_the_index(demo, tmp_path, damage):
+    """Flipped bytes in the connection record at the start of the first chunk (a field name, or a field's length):
+    rosbags reads the bag whole through the copy of every connection record a closed bag keeps in its index, but
+    repair stopped there with nothing written. The damaged record is now read from that copy: every message comes
+    back, under the original connection. Without the index (the bag cut before it) that copy is gone: nothing to
+    recover, said clearly."""
+    data = bytearray(demo["bytes"])
+    first = min(demo["datapos"].values())
+    record = data.index(b"op=\x07", first)
+    at = data.index(damage.encode(), record) - (4 if damage == "message_definition=" else 0)
+    data[at] ^= 0x55
+    bad = tmp_path / "bad.bag"
+    bad.write_bytes(bytes(data))
+    with Recording(bad) as rec:  # (read through the index, as rosbags does)
+        assert rec.topics()["/scan"].count == DEMO_MESSAGES
+    out = tmp_path / "fixed.bag"
+    report = repair_recording(bad, out)
+    assert report.counts == {"/scan": DEMO_MESSAGES}
+    assert not report.complete  # a record was damaged
+    assert "damaged connection record" in report.summary()
+    assert _ros1_messages(out) == demo["messages"]
+    with Ros1Reader(out) as reader:
+        (conn,) = reader.connections
+        assert (conn.topic, conn.msgtype, conn.digest, conn.msgdef) == (
+            demo["conn"].topic, demo["conn"].msgtype, demo["conn"].digest, demo["conn"].msgdef)
+    cut = tmp_path / "cut.bag"  # the same damage, and the file cut in half: no index
+    cut.write_bytes(bytes(data[: len(data) // 2]))
+    with pytest.raises(RecordingError, match=r"no complete message.*corrupt.*nothing written"):
+        repair_recording(cut, tmp_path / "cut_fixed.bag")
+    assert not (tmp_path / "cut_fixed.bag").exists()
+
+
 def _ros1_record(fields: dict[str, bytes], data: bytes) -> bytes:
     """A ROS 1 bag record (wiki.ros.org/Bags/Format/2.0): header length, name=value fields, data length, data."""
     header = b"".join(struct.pack("<I", len(k) + 1 + len(v)) + k.encode() + b"=" + v for k, v in fields.items())

@@ -422,7 +422,8 @@ def repair(
                                          "a rosbag2 folder (MCAP) for MCAP.")],
 ) -> None:
     """Recover every complete message of a cut-off or damaged recording into a new one (as rosbag reindex and
-    mcap recover do): the records are read from the start, up to the first incomplete or corrupt one."""
+    mcap recover do): the records are read from the start, up to the first incomplete or corrupt one (a damaged
+    connection record of a closed ROS 1 bag is read from its copy in the bag's index)."""
     from .io.recover import repair_recording
 
     _no_folder_under_a_file(output, "--output")

@@ -11,7 +11,8 @@ and writes every complete message into a new recording that opens:
   The output is a rosbag2 folder (MCAP) with the original schemas, QoS and the folder's custom data.
 
 Reading stops cleanly at the first record that is incomplete or corrupt; a chunk cut off by the end
-of the file still gives the messages of its complete part. Record layouts:
+of the file still gives the messages of its complete part. A closed ROS 1 bag repeats its connection
+records in its index: a damaged one inside a chunk is read from that copy, and reading goes on. Record layouts:
 http://wiki.ros.org/Bags/Format/2.0 and https://mcap.dev/spec.
 """
 
@@ -106,6 +107,8 @@ class ScanEnd:
     reason: str = "not read"
     complete: bool = False
     compression: str = "none"  # the chunks' compression (ROS 1), kept in the output
+    # (ROS 1) offsets of damaged connection records read from their copies in the bag's index instead
+    replaced: list[int] = field(default_factory=list)
 
 
 class _Stop(Exception):
@@ -245,9 +248,12 @@ def _ros1_message(fields: dict[str, bytes], body: bytes, connections: dict[int, 
 
 def _ros1_chunk_records(
     data: bytes, connections: dict[int, Ros1Connection], where: Callable[[int], int],
+    copies: dict[int, Ros1Connection] | None = None, replaced: list[int] | None = None,
 ) -> Iterator[tuple[Ros1Connection, int, bytes]]:
     """Connection and message records inside a chunk's (uncompressed) data; ``where`` maps an offset
-    inside the data to the file offset reported when a record there is damaged."""
+    inside the data to the file offset reported when a record there is damaged. A damaged connection record
+    whose header still names its connection is read from ``copies`` (the bag index's), its offset noted in
+    ``replaced``."""
     pos = 0
     while pos < len(data):
         off = where(pos)
@@ -266,13 +272,45 @@ def _ros1_chunk_records(
         body = data[start:start + dlen]
         op = fields.get("op", b"\0")[0]
         if op == _OP_CONNECTION:
-            conn_id, conn = _ros1_connection(fields, body, off)
+            try:
+                conn_id, conn = _ros1_connection(fields, body, off)
+            except _Stop:
+                conn_id = _u32(fields, "conn", off)
+                if copies is None or conn_id not in copies:
+                    raise
+                conn = copies[conn_id]
+                if replaced is not None:
+                    replaced.append(off)
+                log.warning("the connection record at byte %d is damaged: its copy in the bag's index is used (%s)",
+                            off, conn.topic)
             connections[conn_id] = conn
         elif op == _OP_MSGDATA:
             yield _ros1_message(fields, body, connections, off)
         else:
             raise _Stop(off, f"record of op {op} inside a chunk (corrupt)")
         pos = start + dlen
+
+
+def _ros1_index_connections(f: BinaryIO, index_pos: int, size: int) -> dict[int, Ros1Connection]:
+    """The connection records of a closed bag's index (at ``index_pos``: a ROS 1 bag repeats every connection
+    record there, after its chunks), as far as they read; empty without an index. ``f`` is left where it was."""
+    copies: dict[int, Ros1Connection] = {}
+    if not 0 < index_pos < size:
+        return copies
+    back = f.tell()
+    try:
+        f.seek(index_pos)
+        while (pos := f.tell()) < size:
+            fields, dlen = _ros1_record(f, pos, size - pos)
+            data = _read(f, dlen, pos, "a record")
+            if fields["op"][0] == _OP_CONNECTION:
+                conn_id, conn = _ros1_connection(fields, data, pos)
+                copies[conn_id] = conn
+    except _Stop:  # a damaged index: the copies read so far
+        pass
+    finally:
+        f.seek(back)
+    return copies
 
 
 def scan_ros1(path: str | Path, end: ScanEnd | None = None) -> Iterator[tuple[Ros1Connection, int, bytes]]:
@@ -286,6 +324,7 @@ def scan_ros1(path: str | Path, end: ScanEnd | None = None) -> Iterator[tuple[Ro
     size = end.size = path.stat().st_size
     connections: dict[int, Ros1Connection] = {}
     index_pos: int | None = None  # from the bag header, once read
+    copies: dict[int, Ros1Connection] = {}  # the connection records of the bag's index, once read
     with path.open("rb") as f:
         if f.read(len(ROS1_MAGIC)) != ROS1_MAGIC:
             raise RecordingError(f"{path}: not a ROS 1 bag (format 2.0): it does not start with '#ROSBAG V2.0'")
@@ -321,13 +360,14 @@ def scan_ros1(path: str | Path, end: ScanEnd | None = None) -> Iterator[tuple[Ro
                         where, end_offset = (lambda p, base=data_pos: base + p), data_pos + len(raw)
                     else:
                         where, end_offset = (lambda p, base=pos: base), pos
-                    yield from _chunk(_ros1_chunk_records(raw, connections, where), cut, end_offset, pos,
-                                      size - pos, data_pos - pos + dlen)
+                    yield from _chunk(_ros1_chunk_records(raw, connections, where, copies, end.replaced), cut,
+                                      end_offset, pos, size - pos, data_pos - pos + dlen)
                     continue
                 data = _read(f, dlen, pos, "a record")
                 if op == _OP_BAGHEADER:
                     index_pos = struct.unpack("<Q", fields["index_pos"])[0] if len(
                         fields.get("index_pos", b"")) == 8 else 0
+                    copies = _ros1_index_connections(f, index_pos, size)
                 elif op == _OP_CONNECTION:
                     conn_id, conn = _ros1_connection(fields, data, pos)
                     connections[conn_id] = conn
@@ -520,7 +560,7 @@ class RepairReport:
     @property
     def complete(self) -> bool:
         """Every file was read to its end: nothing was damaged."""
-        return all(e.complete for e in self.ends)
+        return all(e.complete and not e.replaced for e in self.ends)
 
     def summary(self) -> str:
         """One line: messages per topic, the time span, where reading stopped."""
@@ -531,8 +571,11 @@ class RepairReport:
             for e in self.ends)
         skipped = (f"; skipped {sum(self.skipped.values())} messages of non-ROS channels "
                    f"({', '.join(sorted(self.skipped))})" if self.skipped else "")
+        replaced = [off for e in self.ends for off in e.replaced]
+        copies = (f"; {len(replaced)} damaged connection record{'s' * (len(replaced) != 1)} (at byte "
+                  f"{', '.join(map(str, replaced))}) read from the copies in the bag's index" if replaced else "")
         return (f"recovered {self.messages} message{'s' * (self.messages != 1)} ({topics}) over {span:.3f} s, "
-                f"{_fmt_ns(self.start_ns)} to {_fmt_ns(self.end_ns)}, into {self.output}; {stops}{skipped}")
+                f"{_fmt_ns(self.start_ns)} to {_fmt_ns(self.end_ns)}, into {self.output}; {stops}{copies}{skipped}")
 
 
 def _fmt_ns(t_ns: int) -> str:
