@@ -101,8 +101,10 @@ def test_cut_inside_the_bag_header(demo, tmp_path):
         assert not out.exists()
 
 
-def test_corrupt_record_stops_the_scan_there(demo, tmp_path):
-    """A message record whose op code is damaged: the messages before it come back, reading stops at it."""
+def test_corrupt_record_stops_the_scan_there_unless_the_bag_was_closed(demo, tmp_path):
+    """A message record whose op code is damaged. In a bag cut off before its index the record's connection may
+    be unknown: the messages before it come back and reading stops at it. In the closed bag (its index repeats
+    the connection records) it is passed over, and every other message comes back."""
     k = 700
     entry = demo["index"][k]
     record = demo["datapos"][entry.chunk_pos] + entry.offset  # the chunk is uncompressed: a file offset
@@ -110,26 +112,41 @@ def test_corrupt_record_stops_the_scan_there(demo, tmp_path):
     op = data.index(b"op=\x02", record)
     assert op < record + 64
     data[op + 3] = 9
-    bad = tmp_path / "bad.bag"
-    bad.write_bytes(bytes(data))
-    report = repair_recording(bad, tmp_path / "bad_fixed.bag")
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(bytes(data[: int(len(data) * 0.9)]))
+    report = repair_recording(cut, tmp_path / "cut_fixed.bag")
     assert report.counts == {"/scan": k}
     assert report.ends[0].offset == record
     assert "corrupt" in report.ends[0].reason
-    assert _ros1_messages(tmp_path / "bad_fixed.bag") == demo["messages"][:k]
+    assert _ros1_messages(tmp_path / "cut_fixed.bag") == demo["messages"][:k]
+    bad = tmp_path / "bad.bag"
+    bad.write_bytes(bytes(data))
+    report = repair_recording(bad, tmp_path / "bad_fixed.bag")
+    assert report.counts == {"/scan": DEMO_MESSAGES - 1}
+    assert report.ends[0].damaged == [record]
+    assert not report.complete
+    assert f"1 damaged record inside its chunks (at byte {record}) passed over" in report.summary()
+    assert _ros1_messages(tmp_path / "bad_fixed.bag") == demo["messages"][:k] + demo["messages"][k + 1:]
 
 
-@pytest.mark.parametrize("damage", ["type=", "message_definition="])
+@pytest.mark.parametrize("damage", ["type=", "message_definition=", "topic=", "op=\x07"])
 def test_damaged_connection_record_of_a_closed_bag_is_read_from_the_index(demo, tmp_path, damage):
-    """Flipped bytes in the connection record at the start of the first chunk (a field name, or a field's length):
-    rosbags reads the bag whole through the copy of every connection record a closed bag keeps in its index, but
-    repair stopped there with nothing written. The damaged record is now read from that copy: every message comes
-    back, under the original connection. Without the index (the bag cut before it) that copy is gone: nothing to
-    recover, said clearly."""
+    """Flipped bytes in the connection record at the start of the first chunk (in its data: a field name, a field's
+    length; in its header: a field's length, the op's name): rosbags reads the bag whole through the copy of every
+    connection record a closed bag keeps in its index, but repair stopped there with nothing written. The damaged
+    record is now passed over and its connection read from that copy: every message comes back, under the original
+    connection. Without the index (the bag cut before it) that copy is gone: nothing to recover, said clearly."""
     data = bytearray(demo["bytes"])
     first = min(demo["datapos"].values())
     record = data.index(b"op=\x07", first)
-    at = data.index(damage.encode(), record) - (4 if damage == "message_definition=" else 0)
+    if damage == "op=\x07":  # the op's name: "oP=" is no op code
+        at = record
+    elif damage == "message_definition=":  # the length of this field
+        at = data.index(damage.encode(), record) - 4
+    elif damage == "topic=":  # the length of this header field
+        at = data.index(damage.encode(), first) - 4
+    else:
+        at = data.index(damage.encode(), record)
     data[at] ^= 0x55
     bad = tmp_path / "bad.bag"
     bad.write_bytes(bytes(data))
@@ -139,7 +156,7 @@ def test_damaged_connection_record_of_a_closed_bag_is_read_from_the_index(demo, 
     report = repair_recording(bad, out)
     assert report.counts == {"/scan": DEMO_MESSAGES}
     assert not report.complete  # a record was damaged
-    assert "damaged connection record" in report.summary()
+    assert "1 damaged record inside its chunks" in report.summary()
     assert _ros1_messages(out) == demo["messages"]
     with Ros1Reader(out) as reader:
         (conn,) = reader.connections

@@ -422,8 +422,8 @@ def repair(
                                          "a rosbag2 folder (MCAP) for MCAP.")],
 ) -> None:
     """Recover every complete message of a cut-off or damaged recording into a new one (as rosbag reindex and
-    mcap recover do): the records are read from the start, up to the first incomplete or corrupt one (a damaged
-    connection record of a closed ROS 1 bag is read from its copy in the bag's index)."""
+    mcap recover do): the records are read from the start, up to the first incomplete or corrupt one (in a closed
+    ROS 1 bag, whose index repeats its connection records, a damaged record is passed over)."""
     from .io.recover import repair_recording
 
     _no_folder_under_a_file(output, "--output")
@@ -1776,7 +1776,7 @@ def _terminated(signum: int, frame: Any) -> None:
     that the next run refused as existing). The exit code is the shell's for SIGTERM, 143 (Ctrl-C's: 130), so that a
     scheduler or script sees which stopped the run."""
     _TERMINATED.append(signum)
-    raise KeyboardInterrupt  # (typer turns it into exit code 130: main() makes that 143)
+    raise KeyboardInterrupt  # (typer turns it into exit code 130: main() makes that 128 + SIGTERM)
 
 
 def main() -> None:
@@ -1798,10 +1798,10 @@ def main() -> None:
         err_console.print(f"[bold red]error:[/] {escape(os_error_line(err))}", highlight=False, soft_wrap=True)
         sys.exit(2)
     except KeyboardInterrupt:
-        err_console.print("interrupted")
+        err_console.print("terminated" if _TERMINATED else "interrupted")
         sys.exit(128 + _TERMINATED[0] if _TERMINATED else 130)
     except SystemExit as err:
-        if _TERMINATED and err.code == 130:  # (typer's exit for a KeyboardInterrupt)
+        if _TERMINATED and err.code not in (0, None):  # (typer exits 130 for a KeyboardInterrupt)
             err_console.print("terminated")
             sys.exit(128 + _TERMINATED[0])
         raise

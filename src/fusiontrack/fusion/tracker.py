@@ -260,9 +260,9 @@ class FusionParams:
         noise, and it reads the camera for everybody. Over 72 runs (seeds 0-35) and rng 0 / 1 / 2
         (``train_interval_s`` 0.2): 249 / 239 / 259 ID switches against 253 / 244 / 260 without it, groups IDF1
         0.915 / 0.922 / 0.910 against 0.914 / 0.915 / 0.910: still within the noise. With today's checks and
-        ``contact_learn_s`` (1.5 s; 72 runs, 30 s, draws 0 / 1): crowd 74 / 73 -> 72 / 72 and groups 21 / 19 -> 20 / 19
-        ID switches, IDF1 within +0.001; only four runs change, each a reborn track re-identified, none for the
-        worse. On ``benchmarks/fusion.py`` (seeds 0-2, ``--fusion learn_all_s=1.5``): ID switches 10 -> 8, IDF1
+        ``contact_learn_s``, at 1.5 s (72 runs, 30 s, draws 0 / 1): crowd 74 / 73 -> 72 / 72 and groups 21 / 19 ->
+        20 / 19 ID switches, IDF1 within +0.001; only four runs change, each a reborn track re-identified, none for
+        the worse. On ``benchmarks/fusion.py`` (seeds 0-2, ``--fusion learn_all_s=1.5``): ID switches 10 -> 8, IDF1
         0.959 -> 0.967, and 1.49x -> 1.58x laser-only's time (3.0 s: 1.57x, 9 switches), over seed 001's 1.5x: the
         cost is the training of everybody's classifiers, not the images read (+3 %).
     reid_min_alone : float or None

@@ -12,7 +12,8 @@ and writes every complete message into a new recording that opens:
 
 Reading stops cleanly at the first record that is incomplete or corrupt; a chunk cut off by the end
 of the file still gives the messages of its complete part. A closed ROS 1 bag repeats its connection
-records in its index: a damaged one inside a chunk is read from that copy, and reading goes on. Record layouts:
+records in its index: there a damaged record inside a chunk is passed over (a connection is known from its
+copy, a damaged message is lost alone) and reading goes on. Record layouts:
 http://wiki.ros.org/Bags/Format/2.0 and https://mcap.dev/spec.
 """
 
@@ -107,8 +108,9 @@ class ScanEnd:
     reason: str = "not read"
     complete: bool = False
     compression: str = "none"  # the chunks' compression (ROS 1), kept in the output
-    # (ROS 1) offsets of damaged connection records read from their copies in the bag's index instead
-    replaced: list[int] = field(default_factory=list)
+    # (ROS 1) damaged records inside the chunks of a closed bag, passed over (the bag's index has the connections):
+    # their offsets (the chunk's for a compressed chunk)
+    damaged: list[int] = field(default_factory=list)
 
 
 class _Stop(Exception):
@@ -238,22 +240,25 @@ def _ros1_connection(fields: dict[str, bytes], data: bytes, offset: int) -> tupl
 
 
 def _ros1_message(fields: dict[str, bytes], body: bytes, connections: dict[int, Ros1Connection],
-                  offset: int) -> tuple[Ros1Connection, int, bytes]:
+                  offset: int, copies: dict[int, Ros1Connection] | None = None) -> tuple[Ros1Connection, int, bytes]:
     conn_id = _u32(fields, "conn", offset)
-    if conn_id not in connections or len(fields.get("time", b"")) != 8:
+    conn = connections.get(conn_id) or (copies or {}).get(conn_id)  # (its record damaged: the index's copy)
+    if conn is None or len(fields.get("time", b"")) != 8:
         raise _Stop(offset, f"message of unknown connection {conn_id} or without a time (corrupt)")
     sec, nsec = struct.unpack("<II", fields["time"])
-    return connections[conn_id], sec * 1_000_000_000 + nsec, body
+    return conn, sec * 1_000_000_000 + nsec, body
 
 
 def _ros1_chunk_records(
     data: bytes, connections: dict[int, Ros1Connection], where: Callable[[int], int],
-    copies: dict[int, Ros1Connection] | None = None, replaced: list[int] | None = None,
+    copies: dict[int, Ros1Connection] | None = None, damaged: list[int] | None = None,
 ) -> Iterator[tuple[Ros1Connection, int, bytes]]:
     """Connection and message records inside a chunk's (uncompressed) data; ``where`` maps an offset
-    inside the data to the file offset reported when a record there is damaged. A damaged connection record
-    whose header still names its connection is read from ``copies`` (the bag index's), its offset noted in
-    ``replaced``."""
+    inside the data to the file offset reported when a record there is damaged.
+
+    With ``copies`` (the connection records of the bag's index: a closed bag), a record whose lengths hold but
+    whose content does not read is passed over and its offset added to ``damaged``: a connection is then known
+    from its copy, a damaged message is lost alone. Without them reading stops at it."""
     pos = 0
     while pos < len(data):
         off = where(pos)
@@ -264,30 +269,31 @@ def _ros1_chunk_records(
             raise _Stop(off, f"record header of {hlen} bytes inside the chunk (corrupt)")
         if pos + 4 + hlen + 4 > len(data):
             raise _Short(off)
-        fields = _ros1_fields(data[pos + 4:pos + 4 + hlen], off)
         (dlen,) = struct.unpack_from("<I", data, pos + 4 + hlen)
         start = pos + 8 + hlen
         if start + dlen > len(data):
             raise _Short(off)
         body = data[start:start + dlen]
-        op = fields.get("op", b"\0")[0]
-        if op == _OP_CONNECTION:
-            try:
+        message = None
+        try:
+            fields = _ros1_fields(data[pos + 4:pos + 4 + hlen], off)
+            op = fields.get("op", b"\0")[0]
+            if op == _OP_CONNECTION:
                 conn_id, conn = _ros1_connection(fields, body, off)
-            except _Stop:
-                conn_id = _u32(fields, "conn", off)
-                if copies is None or conn_id not in copies:
-                    raise
-                conn = copies[conn_id]
-                if replaced is not None:
-                    replaced.append(off)
-                log.warning("the connection record at byte %d is damaged: its copy in the bag's index is used (%s)",
-                            off, conn.topic)
-            connections[conn_id] = conn
-        elif op == _OP_MSGDATA:
-            yield _ros1_message(fields, body, connections, off)
-        else:
-            raise _Stop(off, f"record of op {op} inside a chunk (corrupt)")
+                connections[conn_id] = conn
+            elif op == _OP_MSGDATA:
+                message = _ros1_message(fields, body, connections, off, copies)
+            else:
+                raise _Stop(off, f"record of op {op} inside a chunk (corrupt)")
+        except _Stop as stop:
+            if not copies:
+                raise
+            if damaged is not None:
+                damaged.append(off)
+            log.warning("the record at byte %d is damaged (%s): passed over, the bag's index has its connections",
+                        off, stop.reason)
+        if message is not None:
+            yield message
         pos = start + dlen
 
 
@@ -300,12 +306,12 @@ def _ros1_index_connections(f: BinaryIO, index_pos: int, size: int) -> dict[int,
     back = f.tell()
     try:
         f.seek(index_pos)
-        while (pos := f.tell()) < size:
+        while (pos := f.tell()) < size:  # the connection records, then the chunk infos
             fields, dlen = _ros1_record(f, pos, size - pos)
-            data = _read(f, dlen, pos, "a record")
-            if fields["op"][0] == _OP_CONNECTION:
-                conn_id, conn = _ros1_connection(fields, data, pos)
-                copies[conn_id] = conn
+            if fields["op"][0] != _OP_CONNECTION:
+                break
+            conn_id, conn = _ros1_connection(fields, _read(f, dlen, pos, "a record"), pos)
+            copies[conn_id] = conn
     except _Stop:  # a damaged index: the copies read so far
         pass
     finally:
@@ -360,7 +366,7 @@ def scan_ros1(path: str | Path, end: ScanEnd | None = None) -> Iterator[tuple[Ro
                         where, end_offset = (lambda p, base=data_pos: base + p), data_pos + len(raw)
                     else:
                         where, end_offset = (lambda p, base=pos: base), pos
-                    yield from _chunk(_ros1_chunk_records(raw, connections, where, copies, end.replaced), cut,
+                    yield from _chunk(_ros1_chunk_records(raw, connections, where, copies, end.damaged), cut,
                                       end_offset, pos, size - pos, data_pos - pos + dlen)
                     continue
                 data = _read(f, dlen, pos, "a record")
@@ -385,6 +391,8 @@ def scan_ros1(path: str | Path, end: ScanEnd | None = None) -> Iterator[tuple[Ro
         end.reason, end.complete = "the end of the file; the bag was never closed (no index)", False
     elif index_pos >= size:
         end.reason, end.complete = f"the end of the file, before its index (at byte {index_pos}): truncated", False
+    elif end.damaged:
+        end.reason, end.complete = "the end of the file (the bag was closed)", True
     else:
         end.reason, end.complete = "the end of the file (the bag is complete)", True
 
@@ -560,7 +568,7 @@ class RepairReport:
     @property
     def complete(self) -> bool:
         """Every file was read to its end: nothing was damaged."""
-        return all(e.complete and not e.replaced for e in self.ends)
+        return all(e.complete and not e.damaged for e in self.ends)
 
     def summary(self) -> str:
         """One line: messages per topic, the time span, where reading stopped."""
@@ -571,9 +579,10 @@ class RepairReport:
             for e in self.ends)
         skipped = (f"; skipped {sum(self.skipped.values())} messages of non-ROS channels "
                    f"({', '.join(sorted(self.skipped))})" if self.skipped else "")
-        replaced = [off for e in self.ends for off in e.replaced]
-        copies = (f"; {len(replaced)} damaged connection record{'s' * (len(replaced) != 1)} (at byte "
-                  f"{', '.join(map(str, replaced))}) read from the copies in the bag's index" if replaced else "")
+        damaged = [off for e in self.ends for off in e.damaged]
+        copies = (f"; {len(damaged)} damaged record{'s' * (len(damaged) != 1)} inside its chunks (at byte "
+                  f"{', '.join(map(str, sorted(set(damaged))))}) passed over, their connections read from the copies "
+                  "in the bag's index" if damaged else "")
         return (f"recovered {self.messages} message{'s' * (self.messages != 1)} ({topics}) over {span:.3f} s, "
                 f"{_fmt_ns(self.start_ns)} to {_fmt_ns(self.end_ns)}, into {self.output}; {stops}{copies}{skipped}")
 
