@@ -19,7 +19,13 @@ each phone over the same times (:func:`associate`):
 Tracklets are decided in time order, jointly with the undecided tracklets that overlap them in time
 (Hungarian with a "nobody" column at the gate cost), and a pair is accepted only when every other
 explanation costs at least ``ambiguity_margin`` more; a phone not yet placed in the world can only take a
-tracklet that moved at least ``min_align_extent_m``. Passes repeat until nothing changes, so a tracklet
+tracklet that moved at least ``min_align_extent_m``, and one that its path explains better than a steady
+straight walk does (by ``ambiguity_margin``; the same four degrees of freedom) or that is confirmed: placed in
+the world by it, the phone takes another undecided tracklet clearly, by shape and place [a passer-by walking
+straight down a corridor matched any phone that walked straight too, at cost 0: on ``corridor`` cut to 30 / 60
+s, seeds 0-3, the first tracklet owned was a passer-by's in 5 of 8 runs (corrected paths 1-16 m off); now none
+is, the phone keeping its dead reckoning at 30 s and the carrier's own stretches owned at 60 s; the 200 s
+runs and the ``wearable_*`` scenes own what they owned]. Passes repeat until nothing changes, so a tracklet
 left open early may be decided once its candidates are placed. Symmetric scenes (two people starting at the
 same moment, mirror-image paths) are ambiguous by shape alone: the tracklets are then left to nobody rather
 than guessed, and the phones stay uncorrected until a later tracklet tells them apart.
@@ -279,8 +285,10 @@ def _predict(phone: PhoneTrack, s: _PhoneState, t_ns: np.ndarray, p: AssocParams
     return pred, np.hypot(p.position_sigma_m, p.drift_per_m * walked) + lost
 
 
-def pair_cost(phone: PhoneTrack, s: _PhoneState, tr: Tracklet, p: AssocParams, gap_s: float = 0.25) -> float:
-    """Normalised cost of "tracklet ``tr`` is the carrier of ``phone``" (inf when it cannot be decided)."""
+def pair_cost(phone: PhoneTrack, s: _PhoneState, tr: Tracklet, p: AssocParams, gap_s: float = 0.25,
+              steady: bool = True) -> float:
+    """Normalised cost of "tracklet ``tr`` is the carrier of ``phone``" (inf when it cannot be decided; with
+    ``steady`` False, a steady walk is not refused to a phone not yet in the world)."""
     if not phone.ok:
         return np.inf
     live = phone.reporting_at(tr.t_ns, gap_s)  # compared where the phone reports: it misses the steps of a gap
@@ -297,7 +305,8 @@ def pair_cost(phone: PhoneTrack, s: _PhoneState, tr: Tracklet, p: AssocParams, g
     d = phone.position_at(t)
     # judged where someone moves: a long wait both agree on would dilute a mismatch of when and how they walk
     moving = (_speed(t, y) > MOVING_MPS) | (_speed(t, d) > MOVING_MPS)
-    e = _similar(d, y, p.scale_range, moving if moving.sum() >= 5 else None)
+    weight = moving if moving.sum() >= 5 else None
+    e = _similar(d, y, p.scale_range, weight)
     extent = max(tr.extent_m, float(np.linalg.norm(np.ptp(d, axis=0))))
     cost = (e / (p.shape_sigma_m + p.shape_scale * extent)) ** 2
     if s.aligned:
@@ -305,7 +314,53 @@ def pair_cost(phone: PhoneTrack, s: _PhoneState, tr: Tracklet, p: AssocParams, g
         cost += float(np.mean(np.sum((y - pred) ** 2, axis=1) / sigma**2)) / 2.0
     elif tr.extent_m < p.min_align_extent_m:
         return np.inf  # a phone not yet in the world cannot tell standing people apart
+    elif steady and (_steady(t, y, weight) / (p.shape_sigma_m + p.shape_scale * extent)) ** 2 - cost < \
+            p.ambiguity_margin:
+        # nor people walking straight on at a steady pace: the similarity takes any such walk onto any other (a
+        # passer-by's tracklet in a corridor matched the phone's path at cost 0.00): the phone's path must explain
+        # the tracklet better than a steady walk does (the same 4 degrees of freedom), by ``ambiguity_margin``;
+        # else only a later (or earlier) tracklet can confirm it (:func:`associate`)
+        return np.inf
     return float(cost)
+
+
+def _steady(t_ns: np.ndarray, xy: np.ndarray, weight: np.ndarray | None = None) -> float:
+    """Residual RMS of the straight walk at a constant velocity that best fits positions ``(n, 2)`` at ``t_ns``:
+    how well "somebody walking steadily" explains them (over the samples selected by ``weight``, all when None;
+    the fit uses every sample, as :func:`_similar`)."""
+    t = (t_ns - t_ns[0]) * 1e-9
+    a = np.column_stack([np.ones_like(t), t])
+    coef, *_ = np.linalg.lstsq(a, xy, rcond=None)
+    res = np.sum((xy - a @ coef) ** 2, axis=1)
+    if weight is not None and weight.any():
+        res = res[weight]
+    return float(np.sqrt(np.mean(res)))
+
+
+def _decide(cost: np.ndarray, p: AssocParams) -> tuple[int, float]:
+    """The phone the first row's tracklet goes to (-1: nobody, or undecided) and by how much every other
+    explanation of the rows costs more."""
+    best, total = _assign(cost, p.gate)
+    c = int(best[0])
+    if c < 0:
+        return -1, np.nan
+    alt = cost.copy()
+    alt[0, c] = np.inf
+    _, total_alt = _assign(alt, p.gate)
+    return (c, total_alt - total) if total_alt - total >= p.ambiguity_margin else (-1, np.nan)
+
+
+def _confirmed(i: int, c: int, tracklets: list[Tracklet], owner: np.ndarray, phones: list[PhoneTrack],
+               p: AssocParams, known: dict[str, bool], gap_s: float) -> bool:
+    """Whether phone ``c``, placed in the world by tracklet ``i`` (with what it owns), takes another undecided
+    tracklet clearly (at most ``gate - ambiguity_margin``), shape and place."""
+    phone = phones[c]
+    s = _state(phone, [t for t, o in zip(tracklets, owner, strict=True) if o == c] + [tracklets[i]],
+               known.get(phone.name, False), p)
+    if not s.aligned:
+        return False
+    return any(pair_cost(phone, s, tr, p, gap_s) <= p.gate - p.ambiguity_margin
+               for k, tr in enumerate(tracklets) if k != i and owner[k] < 0 and not tr.overlaps(tracklets[i]))
 
 
 def _assign(cost: np.ndarray, gate: float) -> tuple[np.ndarray, float]:
@@ -349,16 +404,18 @@ def associate(tracklets: list[Tracklet], phones: list[PhoneTrack], params: Assoc
             taken = {int(owner[k]) for k, o in enumerate(tracklets) if owner[k] >= 0 and tr.overlaps(o)}
             cost = np.array([[np.inf if c in taken else pair_cost(phones[c], states[c], tracklets[g], p, gap_s)
                               for c in range(m)] for g in group])
-            best, total = _assign(cost, p.gate)
-            c = int(best[0])
+            c, gain = _decide(cost, p)
             if c < 0:
-                continue
-            alt = cost.copy()
-            alt[0, c] = np.inf
-            _, total_alt = _assign(alt, p.gate)
-            if total_alt - total < p.ambiguity_margin:
-                continue
-            owner[i], margin[i] = c, total_alt - total
+                # a steady walk may place a phone in the world only if it is confirmed: placed so, the phone's path
+                # meets another tracklet of its person later (or earlier) where and as it walks
+                weak = np.array([[np.inf if c in taken else pair_cost(phones[c], states[c], tracklets[g], p, gap_s,
+                                                                      steady=False)
+                                  for c in range(m)] for g in group])
+                c, gain = _decide(weak, p)
+                if c < 0 or np.isfinite(cost[0, c]) or not _confirmed(i, c, tracklets, owner, phones, p, known,
+                                                                      gap_s):
+                    continue
+            owner[i], margin[i] = c, gain
             states[c] = _state(phones[c], [t for t, o in zip(tracklets, owner, strict=True) if o == c],
                                known.get(phones[c].name, False), p)
             changed = True
