@@ -21,14 +21,17 @@ Tracklets are decided in time order, jointly with the undecided tracklets that o
 explanation costs at least ``ambiguity_margin`` more; a phone not yet placed in the world can only take a
 tracklet that moved at least ``min_align_extent_m``, and one that its path explains better than a steady
 straight walk does (by ``ambiguity_margin``; the same four degrees of freedom) or that is confirmed: placed in
-the world by it, the phone takes another undecided tracklet clearly, by shape and place [a passer-by walking
-straight down a corridor matched any phone that walked straight too, at cost 0: on ``corridor`` cut to 30 / 60
-s, seeds 0-3, the first tracklet owned was a passer-by's in 5 of 8 runs (corrected paths 1-16 m off); now none
-is, the phone keeping its dead reckoning at 30 s and the carrier's own stretches owned at 60 s; the 200 s
-runs and the ``wearable_*`` scenes own what they owned]. Passes repeat until nothing changes, so a tracklet
-left open early may be decided once its candidates are placed. Symmetric scenes (two people starting at the
-same moment, mirror-image paths) are ambiguous by shape alone: the tracklets are then left to nobody rather
-than guessed, and the phones stay uncorrected until a later tracklet tells them apart.
+the world by it, the phone then takes another undecided tracklet, decided as here (:func:`_confirmed`) [a
+passer-by walking straight down a corridor matched any phone that walked straight too, at cost 0. On ``corridor``
+cut to 30 s, seeds 0-3, the one tracklet owned was a passer-by's in all four runs (corrected paths 1-16 m off):
+now none is owned and the phone keeps its dead reckoning. At 60 s: seeds 0 and 3 own the carrier's stretches as
+before, seed 2 no longer owns a passer-by's (15 m off), and seed 1 no longer owns the carrier's, unconfirmed. At
+90 s (seeds 1, 2) a passer-by's is still owned, confirmed by the carrier's a long walk later (see
+:func:`_confirmed`). The 200 s runs (seeds 0-2) and the ``wearable_*`` scenes (seeds 0-2) own what they owned. A
+refused steady walk still counts as an explanation against the other phones]. Passes repeat until nothing
+changes, so a tracklet left open early may be decided once its candidates are placed. Symmetric scenes (two
+people starting at the same moment, mirror-image paths) are ambiguous by shape alone: the tracklets are then left
+to nobody rather than guessed, and the phones stay uncorrected until a later tracklet tells them apart.
 
 The owned detections become the phone's fixes (:mod:`~fusiontrack.fusion.wearable_correct`).
 """
@@ -328,10 +331,14 @@ def _steady(t_ns: np.ndarray, xy: np.ndarray, weight: np.ndarray | None = None) 
     """Residual RMS of the straight walk at a constant velocity that best fits positions ``(n, 2)`` at ``t_ns``:
     how well "somebody walking steadily" explains them (over the samples selected by ``weight``, all when None;
     the fit uses every sample, as :func:`_similar`)."""
-    t = (t_ns - t_ns[0]) * 1e-9
+    ok = np.all(np.isfinite(xy), axis=1)
+    if ok.sum() < 2:
+        return np.inf
+    weight = None if weight is None else weight[ok]
+    t = (t_ns[ok] - t_ns[ok][0]) * 1e-9
     a = np.column_stack([np.ones_like(t), t])
-    coef, *_ = np.linalg.lstsq(a, xy, rcond=None)
-    res = np.sum((xy - a @ coef) ** 2, axis=1)
+    coef, *_ = np.linalg.lstsq(a, xy[ok], rcond=None)
+    res = np.sum((xy[ok] - a @ coef) ** 2, axis=1)
     if weight is not None and weight.any():
         res = res[weight]
     return float(np.sqrt(np.mean(res)))
@@ -351,16 +358,33 @@ def _decide(cost: np.ndarray, p: AssocParams) -> tuple[int, float]:
 
 
 def _confirmed(i: int, c: int, tracklets: list[Tracklet], owner: np.ndarray, phones: list[PhoneTrack],
-               p: AssocParams, known: dict[str, bool], gap_s: float) -> bool:
-    """Whether phone ``c``, placed in the world by tracklet ``i`` (with what it owns), takes another undecided
-    tracklet clearly (at most ``gate - ambiguity_margin``), shape and place."""
+               states: list[_PhoneState], p: AssocParams, known: dict[str, bool], gap_s: float) -> float | None:
+    """Phone ``c`` placed in the world by tracklet ``i`` (with what it owns): the margin by which it then takes
+    another undecided tracklet that does not overlap ``i`` in time, decided as :func:`associate` decides (jointly
+    with the tracklets overlapping that one, against every phone and nobody); None when no tracklet does.
+
+    The placement's spread grows with the distance walked (``drift_per_m``): a tracklet a long walk away confirms
+    little (on ``corridor``, 90 s, seed 2, a passer-by's tracklet was confirmed by the carrier's 40 m later, 6 m
+    off the prediction). Asking for a spread under 1 m confirmed nothing on ``corridor``'s 200 s, whose RGB-D spots
+    are further apart, where the first steady tracklet decided is the carrier's: not asked for."""
     phone = phones[c]
-    s = _state(phone, [t for t, o in zip(tracklets, owner, strict=True) if o == c] + [tracklets[i]],
-               known.get(phone.name, False), p)
-    if not s.aligned:
-        return False
-    return any(pair_cost(phone, s, tr, p, gap_s) <= p.gate - p.ambiguity_margin
-               for k, tr in enumerate(tracklets) if k != i and owner[k] < 0 and not tr.overlaps(tracklets[i]))
+    trial = list(states)
+    trial[c] = _state(phone, [t for t, o in zip(tracklets, owner, strict=True) if o == c] + [tracklets[i]],
+                      known.get(phone.name, False), p)
+    if not trial[c].aligned:
+        return None
+    for k, tr in enumerate(tracklets):
+        if k == i or owner[k] >= 0 or tr.overlaps(tracklets[i]):
+            continue
+        group = [k] + [g for g, o in enumerate(tracklets) if g not in (i, k) and owner[g] < 0 and tr.overlaps(o)]
+        taken = {int(owner[g]) for g, o in enumerate(tracklets) if owner[g] >= 0 and tr.overlaps(o)}
+        cost = np.array([[np.inf if q in taken else pair_cost(phones[q], trial[q], tracklets[g], p, gap_s,
+                                                              steady=False)
+                          for q in range(len(phones))] for g in group])
+        q, gain = _decide(cost, p)
+        if q == c:
+            return gain
+    return None
 
 
 def _assign(cost: np.ndarray, gate: float) -> tuple[np.ndarray, float]:
@@ -402,18 +426,18 @@ def associate(tracklets: list[Tracklet], phones: list[PhoneTrack], params: Assoc
                 continue
             group = [i] + [k for k, o in enumerate(tracklets) if k != i and owner[k] < 0 and tr.overlaps(o)]
             taken = {int(owner[k]) for k, o in enumerate(tracklets) if owner[k] >= 0 and tr.overlaps(o)}
-            cost = np.array([[np.inf if c in taken else pair_cost(phones[c], states[c], tracklets[g], p, gap_s)
+            # (a steady walk counts as an explanation here: refused, it would make the other phones look certain)
+            cost = np.array([[np.inf if c in taken else pair_cost(phones[c], states[c], tracklets[g], p, gap_s,
+                                                                  steady=False)
                               for c in range(m)] for g in group])
             c, gain = _decide(cost, p)
             if c < 0:
-                # a steady walk may place a phone in the world only if it is confirmed: placed so, the phone's path
-                # meets another tracklet of its person later (or earlier) where and as it walks
-                weak = np.array([[np.inf if c in taken else pair_cost(phones[c], states[c], tracklets[g], p, gap_s,
-                                                                      steady=False)
-                                  for c in range(m)] for g in group])
-                c, gain = _decide(weak, p)
-                if c < 0 or np.isfinite(cost[0, c]) or not _confirmed(i, c, tracklets, owner, phones, p, known,
-                                                                      gap_s):
+                continue
+            if not np.isfinite(pair_cost(phones[c], states[c], tr, p, gap_s)):
+                # a steady walk places a phone in the world only if it is confirmed: placed so, the phone takes
+                # another tracklet soon after (or before), where and as it walks; the margin is then that one's
+                gain = _confirmed(i, c, tracklets, owner, phones, states, p, known, gap_s)
+                if gain is None:
                     continue
             owner[i], margin[i] = c, gain
             states[c] = _state(phones[c], [t for t, o in zip(tracklets, owner, strict=True) if o == c],
