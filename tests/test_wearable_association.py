@@ -7,9 +7,10 @@ from __future__ import annotations
 import csv
 
 import numpy as np
-import pytest
 
 from fusiontrack.fusion.wearable import WearableParams, track_wearable
+from fusiontrack.fusion.wearable_assoc import Tracklet, associate
+from fusiontrack.fusion.wearable_data import PhoneTrack
 from fusiontrack.sim.scenario import load_scenario
 from fusiontrack.sim.simulator import Simulation
 
@@ -18,41 +19,35 @@ def _truth_at(track: np.ndarray, t_ns: np.ndarray) -> np.ndarray:
     return np.column_stack([np.interp(t_ns, track[:, 0], track[:, 1]), np.interp(t_ns, track[:, 0], track[:, 2])])
 
 
-@pytest.mark.parametrize(("seconds", "seed", "owned"), [(30.0, 2, False)])
-def test_a_passer_by_walking_straight_is_not_taken_for_the_phone_carrier(simulated, seconds, seed, owned):
+def test_a_passer_by_walking_straight_is_not_taken_for_the_phone_carrier(simulated):
     """``corridor`` (seed 002's setting: one phone carrier and three passers-by; RGB-D cameras see short straight
-    stretches of the corridors), cut short. Every tracklet is a steady straight walk, which a similarity takes onto
-    any other: on seed 2 (30 s) the one decided, a passer-by's, matched the phone's path at cost 0, and the corrected
-    path was 1 m off the carrier (15 m at 60 s). A steady walk now places a phone in the world only if another
-    tracklet, decided then for the phone, confirms it: here none does and the phone keeps its dead reckoning (on seed
-    0 at 60 s the carrier's two stretches confirm each other: see the synthetic test below, a 40 s test here). Truth:
-    the carrier (the simulator's plan) and the agents' floor tracks."""
-    sim = Simulation(load_scenario("corridor").with_overrides(seconds=seconds, seed=seed))
+    stretches of the corridors), cut to 30 s, seed 2. Every tracklet is a steady straight walk, which a similarity
+    takes onto any other: the one decided, a passer-by's, matched the phone's path at cost 0, and the corrected path
+    was 1 m off the carrier (15 m at 60 s). A steady walk now places a phone in the world only if another tracklet,
+    decided then for the phone, confirms it: here none does, nothing is owned and the phone keeps its dead reckoning
+    (the carrier's stretches confirming each other: the synthetic test below). Truth: the carrier (the simulator's
+    plan) and the agents' floor tracks."""
+    sim = Simulation(load_scenario("corridor").with_overrides(seconds=30.0, seed=2))
     (carrier,) = [p.agent_id for p in sim.pedestrian_plans if p.phone]
-    recording = simulated("corridor", seconds=seconds, seed=seed)
+    recording = simulated("corridor", seconds=30.0, seed=2)
     truth: dict[int, list] = {}
     with open(recording / "ground_truth" / "agents.csv", newline="") as f:
         for r in csv.DictReader(f):
-            truth.setdefault(int(r["id"]), []).append((int(r["t_ns"]), float(r["x"]), float(r["y"]), 0.0))
+            truth.setdefault(int(r["id"]), []).append((int(r["t_ns"]), float(r["x"]), float(r["y"])))
     truth_xy = {k: np.array(v) for k, v in truth.items()}
     result = track_wearable(recording, WearableParams(cameras=()))
-    assert len(result.tracklets) >= 3  # (a passer-by's among them)
-    mine = [tr for tr, o in zip(result.tracklets, result.owner, strict=True) if o >= 0]
-    for tr in mine:  # whatever is owned is the carrier's
+    walkers = set()  # whose walk each tracklet is
+    for tr in result.tracklets:
         dist = {a: np.median(np.linalg.norm(_truth_at(xs, tr.t_ns) - tr.xy_m, axis=1)) for a, xs in truth_xy.items()}
-        assert min(dist, key=dist.get) == carrier
+        walkers.add(min(dist, key=dist.get))
+    assert walkers - {carrier}  # passers-by's tracklets are there to be mistaken
+    assert (result.owner < 0).all()
     (pr,) = result.people.values()
-    assert bool(mine) == owned == pr.correction.aligned
-    if owned:
-        sel = pr.correction.corrected
-        err = np.linalg.norm(pr.correction.xy_m[sel] - _truth_at(truth_xy[carrier], pr.correction.t_ns[sel]), axis=1)
-        assert float(np.mean(err)) < 0.5
+    assert not pr.correction.aligned
 
 
-def _phone(name: str, velocity, seconds: float = 60.0):
+def _phone(name: str, velocity, seconds: float = 60.0) -> PhoneTrack:
     """A phone's dead reckoning from (0, 0) at 50 Hz, its velocity a function of time (s)."""
-    from fusiontrack.fusion.wearable_data import PhoneTrack
-
     hz = 50
     t = np.arange(0, seconds * hz + 1) / hz
     v = np.array([velocity(x) for x in t])
@@ -62,9 +57,7 @@ def _phone(name: str, velocity, seconds: float = 60.0):
                       object(), "", t.size)
 
 
-def _tracklet(t_s: np.ndarray, xy: np.ndarray, seed: int = 0):
-    from fusiontrack.fusion.wearable_assoc import Tracklet
-
+def _tracklet(t_s: np.ndarray, xy: np.ndarray, seed: int = 0) -> Tracklet:
     xy = xy + np.random.default_rng(seed).normal(0, 0.03, xy.shape)  # (RGB-D detections' noise)
     return Tracklet(np.arange(t_s.size), (t_s * 1e9).astype(np.int64), xy)
 
@@ -76,8 +69,6 @@ def test_two_steady_stretches_of_the_carrier_confirm_each_other_and_a_lone_passe
     carrier's and the passer-by's are both left to nobody (the passer-by's was taken: cost 0). Together, the
     carrier's two confirm each other (placed by the first, the phone meets the second where it walks) and the
     passer-by's stays nobody's."""
-    from fusiontrack.fusion.wearable_assoc import associate
-
     phone = _phone("A", lambda t: (1.3, 0.0) if t < 20 else (0.0, 1.3), seconds=45.0)
     turn = np.radians(60)
     rot = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
@@ -100,8 +91,6 @@ def test_a_steady_walk_refused_to_one_phone_still_counts_against_another():
     east 2 m beside. A tracklet of A's carrier (a steady walk) explains A's path at cost 0.03, B's at 0.8: the two are
     ambiguous and it is left to nobody. A refuses it only until confirmed; counted as impossible, the refusal made B
     look certain, and B took the tracklet of A's carrier (margin 8.2)."""
-    from fusiontrack.fusion.wearable_assoc import associate
-
     a = _phone("A", lambda t: (1.3, 0.0))
     b = _phone("B", lambda t: (1.3, 0.0) if t < 30 else (0.0, 1.3))
     t = np.arange(30, 35, 1 / 15)  # A's carrier seen at 30-35 s, on y = 2 m (B's path is on y = 0)
