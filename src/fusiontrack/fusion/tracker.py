@@ -49,7 +49,12 @@
    merge since the check opened (the laser cannot tell merged people apart): groups 21 / 19 -> 27 / 27 on the same
    runs, the merge was mostly not where the tracks were exchanged. The date counts to the frame: groups seed 0's pair
    came within 0.31 m at 14.33 s, where the laser exchanged them, and within 0.30 m at 16.6 s, the date taken; the
-   earliest approach within 0.1 m of the closest mends that one and breaks groups seed 10's];
+   earliest approach within 0.1 m of the closest mends that one and breaks groups seed 10's]. Where the tracks'
+   motion shows the exchange, it dates it instead: the step where each track jumped onto the course of the other
+   (:func:`_exchange_date`) [RECON: a laser exchange of two tracks is a jump of both against their motion; two
+   people walking side by side show none, and their closest approach dates it as before. On the 72 runs, draws 0 /
+   1: groups 21 / 19 -> 17 / 15 ID switches (groups seeds 0 and 5, each 4 -> 0: the exchange dated to the frame),
+   crowd 74 / 73 unchanged, no run worse];
 4. **learning** [B15] — a noncorrelated target with another target within ``d_train_m`` (1.5 m) learns from
    the camera image nearest in time: positives from its projected box (B11), negatives from the boxes of
    its ``L`` closest targets (patches centred in another box are dropped, unless the laser puts the box's own
@@ -297,9 +302,9 @@ class FusionParams:
         73 and IDF1 0.958 / 0.955 -> 0.957 / 0.956. On ``benchmarks/fusion.py`` (seeds 0-2) it repairs groups seed
         0's exchange of 14.3 s at 21.4 s (mean evidence -0.60, just at ``check_margin``; dated from the pair's
         closest approach at 16.7 s): IDF1 0.857 -> 0.956 there, 0.943 -> 0.959 over the six runs, and 2 -> 4 ID
-        switches (the repair counts as two); the camera is read for 1077 images instead of 894 and trained on 1017
-        instead of 624, and the fused time per frame goes from 1.38x laser-only's to 1.49x (seed 001's target: at
-        most 1.5x; every 0.1 s it was about 1.6x).
+        switches (the repair counts as two; dated since by the tracks' motion, at 14.31 s: 0 there); the camera
+        is read for 1077 images instead of 894 and trained on 1017 instead of 624, and the fused time per frame
+        goes from 1.38x laser-only's to 1.49x (seed 001's target: at most 1.5x; every 0.1 s it was about 1.6x).
     appearance : AppearanceParams
         The classifiers (B12-B14).
     """
@@ -612,6 +617,8 @@ class _Check:
     image_ns: int = -1  # the last image that gave evidence
     decided: bool = False  # decided since the pair's last contact: waits for the next contact
     exchanged: bool = False  # an exchange was decided: the pair's later checks keep these voters
+    path: list[tuple[int, np.ndarray]] = field(default_factory=list)  # (t_ns, the pair's (2, 4) states: x, y, vx,
+    # vy) on the steps they were in contact since the check opened: where the laser tracks may have been exchanged
 
 
 @dataclass(slots=True)
@@ -655,6 +662,49 @@ def relabel_states(states: Sequence[TrackState], relabels: Sequence[Relabel]) ->
     for k in np.flatnonzero(new != ids):
         out[k] = dataclasses.replace(states[k], track_id=int(new[k]))
     return out
+
+
+DATE_WINDOW_S = 0.2  # half-width of the window in which an exchange of two laser tracks is looked for
+DATE_GAIN_M = 0.1  # how much better, in metres, the exchanged tracks must continue each other's motion
+
+
+def _exchange_date(c: _Check) -> int:
+    """When the laser tracks of an exchanged check took each other's person.
+
+    An exchange of two laser tracks shows in their motion: each track's position ``DATE_WINDOW_S`` after it is
+    better predicted (constant velocity) from the other track's state ``DATE_WINDOW_S`` before it than from its own.
+    Over the steps on which the pair was in contact since the check opened, the window where exchanging the tracks
+    shortens the two prediction errors most (by more than ``DATE_GAIN_M``) holds the exchange; it is dated at the
+    step within it where exchanging the tracks from then on shortens their one-step prediction errors most (where
+    the laser tracks jumped onto each other's person). Without such a window (e.g. two people walking side by side,
+    whose tracks continue either person's motion alike) the pair's closest approach since the check opened dates it
+    (``c.swap_from_ns``).
+    """
+    if len(c.path) < 3:
+        return c.swap_from_ns
+    t = np.array([tk for tk, _ in c.path], np.int64)
+    x = np.stack([xk for _, xk in c.path])  # (n, 2, 4)
+    w = round(DATE_WINDOW_S * 1e9)
+    lo = np.searchsorted(t, t - w)
+    hi = np.searchsorted(t, t + w, side="right") - 1
+    span = (t[hi] - t[lo]) * 1e-9
+    ok = (span >= DATE_WINDOW_S) & (span <= 3 * DATE_WINDOW_S)  # a full window, not across a gap in the contact
+    if not ok.any():
+        return c.swap_from_ns
+    lo, hi, span = lo[ok], hi[ok], span[ok]
+    pred = x[lo, :, :2] + x[lo, :, 2:] * span[:, None, None]  # (m, 2, 2): each track's own prediction
+    after = x[hi, :, :2]
+    own = np.linalg.norm(after - pred, axis=2).sum(axis=1)
+    crossed = np.linalg.norm(after[:, ::-1] - pred, axis=2).sum(axis=1)
+    gain = own - crossed
+    k = int(np.argmax(gain))
+    if gain[k] <= DATE_GAIN_M:
+        return c.swap_from_ns
+    j = np.arange(lo[k] + 1, hi[k] + 1)  # the step within it where exchanging the tracks from on shortens most
+    step_pred = x[j - 1, :, :2] + x[j - 1, :, 2:] * ((t[j] - t[j - 1]) * 1e-9)[:, None, None]
+    step_gain = (np.linalg.norm(x[j, :, :2] - step_pred, axis=2).sum(axis=1)
+                 - np.linalg.norm(x[j, ::-1, :2] - step_pred, axis=2).sum(axis=1))
+    return int(t[j[int(np.argmax(step_gain))]])
 
 
 def _occlusion(boxes: np.ndarray, ok: np.ndarray) -> np.ndarray:
@@ -1245,12 +1295,14 @@ class FusionTracker:
         for pair in contacts:
             dist = float(d[row[pair[0]], row[pair[1]]])
             c = checks.get(pair)
+            if c is not None and not c.decided and c.voters:
+                c.path.append((t_ns, self._pair_state(states, row, pair)))
             if c is None or not c.voters:
                 # a classifier trained only after the contact may have learnt the other person: it never votes.
                 # A check without voters is (re)opened at each contact until one of the two has a classifier.
                 # (a classifier that learnt alone, ``learn_all_s``, never saw a person near its own: no voter)
                 voters = frozenset(tid for tid in pair if self.bank.is_trained(tid) and tid not in self._alone)
-                checks[pair] = _Check(t_ns, dist, t_ns, voters)
+                checks[pair] = _Check(t_ns, dist, t_ns, voters, path=[(t_ns, self._pair_state(states, row, pair))])
                 if p.contact_learn_s is not None:  # the voters go on learning; their votes are the classifiers of
                     # now (or of the opening of another check of theirs still undecided, which may hold the person)
                     for tid in voters:
@@ -1260,7 +1312,8 @@ class FusionTracker:
             if c.decided:  # a decided pair still or again in contact: checked again, by the same voters (a
                 # classifier first trained during the contact, e.g. of a track born beside the other, may have
                 # learnt the other person under its id); new voters only once the check is dropped (check_s apart)
-                checks[pair] = _Check(t_ns, dist, c.near_ns, c.voters, exchanged=c.exchanged)
+                checks[pair] = _Check(t_ns, dist, c.near_ns, c.voters, exchanged=c.exchanged,
+                                      path=[(t_ns, self._pair_state(states, row, pair))])
                 continue
             if dist < c.closest_m:  # an exchange, if any, most likely happened where the two tracks came closest;
                 # the evidence gathered before it was of the identities before it: it would dilute the evidence of
@@ -1327,7 +1380,7 @@ class FusionTracker:
                     self.stats.checks += 1
                     reliable = mean >= 0 or self._reliable(voters)
                     self.stats.withheld += not reliable
-                    if mean < 0 and reliable and self._exchange(pair[0], pair[1], c.swap_from_ns, t_ns, mean):
+                    if mean < 0 and reliable and self._exchange(pair[0], pair[1], _exchange_date(c), t_ns, mean):
                         c.exchanged = True
                         exchanged.append(pair)
                         busy.update(pair)
@@ -1341,6 +1394,11 @@ class FusionTracker:
             states = [dataclasses.replace(st, track_id=b if st.track_id == a else a)
                       if st.track_id in (a, b) else st for st in states]
         return states
+
+    @staticmethod
+    def _pair_state(states: list[TrackState], row: Mapping[int, int], pair: tuple[int, int]) -> np.ndarray:
+        """The (2, 4) floor states ``x, y, vx, vy`` of ``pair``'s tracks at this step."""
+        return np.array([[*states[row[tid]].position_m, *states[row[tid]].velocity_mps] for tid in pair])
 
     def _undecided_elsewhere(self, tid: int, pair: tuple[int, int]) -> tuple[int, int] | None:
         """A pair other than ``pair`` whose check ``tid`` votes in and which is undecided (its vote is then the copy
@@ -1367,6 +1425,7 @@ class FusionTracker:
                 if pair != (a, b) and pair != (b, a):  # nor the approaches of the other track it now names: an
                     # exchange of this pair later is dated from here on (the next contact's distances)
                     c.swap_from_ns, c.closest_m = t_ns, math.inf
+                    c.path.clear()
         for tid in (a, b):  # a claim's summed scores would mix two people
             self._claims.pop(tid, None)
             if self.bank.is_frozen(tid):  # what it learnt since its check opened was (partly) of the other person
