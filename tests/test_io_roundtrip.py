@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import numpy as np
 import pytest
@@ -221,3 +222,52 @@ def test_a_topic_never_stamped_beside_topics_on_another_clock_is_warned_of(tmp_p
     with caplog.at_level("WARNING", logger="fusiontrack"), Recording(tmp_path / "r") as rec:
         list(rec.messages(time_source="log"))  # one clock: nothing to say
     assert not [r for r in caplog.records if "two clocks" in r.getMessage()]
+
+
+@pytest.mark.parametrize("order", ["scans first", "images first", "alternate"])
+def test_one_pass_for_scans_and_raw_images_reads_what_two_passes_read(simulated, order):
+    """``messages_and_raw``: one pass over a simulated recording (lasers and a camera sharing the file's chunks)
+    gives its two readers what two passes give, however the two readers take turns: the converted scans of
+    :meth:`Recording.messages`, and every image's raw record in log-time order."""
+    path = simulated("crowd", seconds=1.5, seed=1)
+    with Recording(path) as rec:
+        lasers = [t for t, i in rec.topic_types().items() if i == "sensor_msgs/msg/LaserScan"]
+        image = rec.image_topic()
+        assert lasers
+        assert image
+        want_scans = list(rec.messages(lasers))
+        want_raw = [(c.topic, t, bytes(d)) for c, t, d in rec._raw(rec.select([image]))]
+        assert len(want_raw) >= 10
+        assert len(want_scans) >= 20
+        scans, raw = rec.messages_and_raw(lasers, [image], keep_ns=10**12)
+        got_scans: list = []
+        got_raw: list = []
+        if order == "scans first":
+            got_scans, got_raw = list(scans), list(raw)
+        elif order == "images first":
+            got_raw, got_scans = list(raw), list(scans)
+        else:
+            for item in raw:
+                got_raw.append(item)
+                got_scans.extend(itertools.islice(scans, 3))
+            got_scans.extend(scans)
+    assert [(c.topic, t, bytes(d)) for c, t, d in got_raw] == want_raw
+    assert len(got_scans) == len(want_scans)
+    assert all(records_equal(a, b) for a, b in zip(got_scans, want_scans, strict=True))
+
+
+def test_raw_records_nobody_takes_are_kept_only_for_keep_ns(simulated):
+    """While only the scans are read, the images read with them wait for the raw reader no longer than ``keep_ns``
+    behind the newest image: what the raw reader gets after the last scan is the recording's last images, those
+    within ``keep_ns`` of its last one (memory stays bounded however long nobody asks for an image)."""
+    path = simulated("crowd", seconds=1.5, seed=1)
+    keep_ns = 300_000_000
+    with Recording(path) as rec:
+        lasers = [t for t, i in rec.topic_types().items() if i == "sensor_msgs/msg/LaserScan"]
+        image = rec.image_topic()
+        want = [t for _, t, _ in rec._raw(rec.select([image]))]
+        scans, raw = rec.messages_and_raw(lasers, [image], keep_ns=keep_ns)
+        assert sum(1 for _ in scans) > 0
+        got = [t for _, t, _ in raw]
+    assert got == [t for t in want if want[-1] - t <= keep_ns]
+    assert 1 < len(got) < len(want)

@@ -39,6 +39,10 @@ class LazyFrames:
         :meth:`at` gives an image only if its log time is this close to the time asked for.
     clock_correction_ns : int
         Added to the image times (the camera client's clock offset, as for the scans).
+    raw : iterator of (connection, log time, bytes), optional
+        The topic's raw records, if the caller reads them (e.g. the second reader of
+        :meth:`~fusiontrack.io.Recording.messages_and_raw`, which reads the file once for the scans and the
+        images); by default they are read from ``rec`` here.
 
     Notes
     -----
@@ -47,7 +51,8 @@ class LazyFrames:
     ``clock_correction_ns``; a camera's latency (log time after capture) does not shift the selection.
     """
 
-    def __init__(self, rec: Any, topic: str, max_dt_ns: int = 50_000_000, clock_correction_ns: int = 0) -> None:
+    def __init__(self, rec: Any, topic: str, max_dt_ns: int = 50_000_000, clock_correction_ns: int = 0,
+                 raw: Iterator[tuple[Any, int, bytes]] | None = None) -> None:
         conns = rec.select([topic], convertible_only=True)
         if not conns:
             raise RecordingError(f"{rec.paths[0]}: no image topic {topic!r}")
@@ -61,7 +66,7 @@ class LazyFrames:
         self._deser = {id(c): owners[id(c)] for c in conns}
         self._it: Iterator[tuple[Any, int, bytes]] = (
             (conn, self._stamp(data, t_log, _is_ros1(conn)) + self.correction_ns, data)
-            for conn, t_log, data in rec._raw(conns))
+            for conn, t_log, data in (rec._raw(conns) if raw is None else raw))
         self._prev: tuple[Any, int, bytes] | None = None
         self._next: tuple[Any, int, bytes] | None = next(self._it, None)
         self._cache: tuple[int, Image | None] | None = None  # (log time, converted image)

@@ -1720,7 +1720,7 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         raise ConfigError(f"adaptive_bias: expected a bool, BiasLearning or BiasParams, got {adaptive_bias!r}")
     corrections = dict(clock_corrections_ns or {})
     first_path = path if isinstance(path, str | Path) else next(iter(path), None)
-    with Recording(path) as rec, Recording(path) as cam_rec, opencv_threads(1):
+    with Recording(path) as rec, opencv_threads(1):
         info = rec.topic_types()
         lasers = [t for t, i in info.items() if i == LASERSCAN] if topics is None else list(topics)
         if not lasers:
@@ -1760,28 +1760,31 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
                                        clock_corrections_ns=laser_corrections))
         bias = None
         if camera is not None and learning is not None and first_path is not None:
-            # one file: the bias pass reads through cam_rec (the camera frames read it only afterwards)
+            # one file: the bias pass reads through rec (opened once), before the tracking pass
             bias = _learn_bias(first_path, cam_sensor, image_topic, camera, poses, learning, corrections,
-                               world_frame, background, cam_rec if first_path is path else None)
+                               world_frame, background, rec if first_path is path else None)
             if bias is not None:
                 camera = bias.corrected_camera
                 if timings is not None:
                     timings.setdefault("bias_s", []).append(bias.seconds)
         frames: Any = None
         lazy: LazyFrames | None = None
-        if camera is not None:
-            frames = lazy = LazyFrames(cam_rec, image_topic, round(p.max_frame_dt_s * 1e9),
-                                       corrections.get(cam_sensor, 0))
+        if camera is not None:  # one pass over the recording for the scans and the images (the file's chunks
+            # hold both: read for each, every chunk was read twice)
+            scans, images = rec.messages_and_raw(lasers, [image_topic], time_source=time_source)
+            frames = lazy = LazyFrames(rec, image_topic, round(p.max_frame_dt_s * 1e9),
+                                       corrections.get(cam_sensor, 0), raw=images)
             if frames_wrapper is not None:
                 frames = frames_wrapper(frames)
+        else:
+            scans = rec.messages(lasers, time_source=time_source)
         auto_area = isinstance(area_m, str)
         if auto_area and area_m != "auto":
             raise ConfigError(f"area_m: expected 'auto', None, a rectangle or a polygon, got {area_m!r}")
         trk = FusionTracker(camera, frames, p, tracker_params, area_m=None if auto_area else area_m, rng=rng,
                             camera_name=cam_sensor or "camera")
         trk.stats.camera, trk.stats.bias, trk.stats.camera_model = cam_sensor, bias, calibrated
-        stream = synchronize(rec.messages(lasers, time_source=time_source), sync_window_ns,
-                             clock_corrections_ns=laser_corrections)
+        stream = synchronize(scans, sync_window_ns, clock_corrections_ns=laser_corrections)
         states, events = run_tracker(trk, detector, poses, stream, total=total, auto_area=auto_area,
                                      classify=classify, progress=progress, timings=timings)
         if lazy is not None:

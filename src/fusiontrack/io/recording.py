@@ -18,7 +18,7 @@ import itertools
 import json
 import logging
 import re
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -577,13 +577,47 @@ class Recording:
         if time_source not in ("header", "log"):
             raise ValueError(f"time_source: expected 'header' or 'log', got {time_source!r}")
         conns = self._select(topics, convertible_only=True)
+        yield from self._converted(self._raw(conns, start_ns, stop_ns), time_source)
+
+    def messages_and_raw(
+        self, topics: Iterable[str], raw_topics: Iterable[str], *, time_source: TimeSource = "header",
+        keep_ns: int = 2_000_000_000,
+    ) -> tuple[Iterator[Message], Iterator[tuple[Connection, int, bytes]]]:
+        """Two readers of one pass over the recording: the records of ``topics`` converted (as :meth:`messages`
+        reads them), and those of ``raw_topics`` as ``(connection, log time, raw bytes)``, unconverted.
+
+        The storage is read once for both: where the records of both sets share the file's chunks (a camera's
+        images between the scans), each chunk is read once instead of once per reader. Each reader may run ahead
+        of the other; what one reads ahead for the other waits in memory until taken, but raw records waiting more
+        than ``keep_ns`` (log time) behind the newest one read are dropped (the raw reader, e.g.
+        :class:`~fusiontrack.fusion.frames.LazyFrames`, wants the records near the other reader's time, not all of
+        them: a camera's images would otherwise pile up while nobody asks for one).
+
+        Raises
+        ------
+        TopicError, MessageTypeError
+            As :meth:`messages` (for ``topics``; ``raw_topics`` need not be convertible).
+        ValueError
+            ``time_source`` is neither ``"header"`` nor ``"log"``.
+        """
+        if time_source not in ("header", "log"):
+            raise ValueError(f"time_source: expected 'header' or 'log', got {time_source!r}")
+        conns = self._select(topics, convertible_only=True)
+        aside = [c for c in self._select(raw_topics, convertible_only=False) if c not in conns]
+        split = _Split(self._raw([*conns, *aside]), {id(c) for c in aside}, keep_ns)
+        converted = (record for _, record in self._converted(split.take(aside=False), time_source))
+        return converted, split.take(aside=True)
+
+    def _converted(self, raw_records: Iterator[tuple[Connection, int, bytes]], time_source: TimeSource,
+                   ) -> Iterator[tuple[str, Message]]:
+        """:meth:`topic_messages` of raw records."""
         owners = {id(c): r for r in self._readers for c in r.connections}
         skipped = self.skipped = Counter()
         reasons: dict[str, str] = {}
         unstamped: Counter[str] = Counter()  # header stamps of 0: the log time stands in
         read: Counter[str] = Counter()
         skew: dict[str, int] = {}  # per stamped topic, its first message's header time - log time
-        for conn, log_ns, raw in self._raw(conns, start_ns, stop_ns):
+        for conn, log_ns, raw in raw_records:
             reader = owners[id(conn)]
             sensor = self.sensor_of(conn.topic)
             try:
@@ -645,6 +679,35 @@ class Recording:
                         "to %s from their log times: two clocks; read with --time log (time_source='log') to put "
                         "every topic on the recorder's clock", ", ".join(never), ", ".join(sorted(apart)),
                         _span_text(max(abs(d) for d in apart.values())))
+
+
+class _Split:
+    """One stream of raw records read by two readers (:meth:`Recording.messages_and_raw`): the records of the
+    ``aside`` connections for one, the others for the other; a record read by one for the other waits in a queue."""
+
+    def __init__(self, records: Iterator[tuple[Connection, int, bytes]], aside: set[int], keep_ns: int) -> None:
+        self._records = records
+        self._aside_ids = aside
+        self._keep_ns = int(keep_ns)
+        self._queues: tuple[deque[tuple[Connection, int, bytes]], deque[tuple[Connection, int, bytes]]] = (
+            deque(), deque())
+        self.dropped = 0  # set-aside records dropped unread (older than keep_ns behind the newest)
+
+    def take(self, aside: bool) -> Iterator[tuple[Connection, int, bytes]]:
+        queue = self._queues[aside]
+        while True:
+            while not queue:
+                item = next(self._records, None)
+                if item is None:
+                    return
+                mine = id(item[0]) in self._aside_ids
+                self._queues[mine].append(item)
+                if mine and not aside:
+                    waiting = self._queues[True]
+                    while len(waiting) > 1 and item[1] - waiting[0][1] > self._keep_ns:
+                        waiting.popleft()
+                        self.dropped += 1
+            yield queue.popleft()
 
 
 def _span_text(ns: int) -> str:
