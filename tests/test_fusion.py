@@ -149,9 +149,12 @@ def test_camera_blackout_leaves_laser_tracking_intact_and_learning_resumes(pair,
     assert stats.train_updates >= 1
 
 
-def test_fusion_tracker_without_interaction_never_reads_the_camera():
-    """Two people 5 m apart: nobody needs the camera, so no image is read (seed 001's cost argument; learning alone,
-    ``learn_all_s``, would read an image now and then for people that nobody comes near: it is off by default)."""
+@pytest.mark.parametrize("learn_all_s", [None, 1.5])
+def test_fusion_tracker_without_interaction_reads_the_camera_only_to_learn_alone(learn_all_s):
+    """Two people 5 m apart: nobody needs the camera for B15's learning or a check, so without learning alone
+    (``learn_all_s`` None) no image is read (seed 001's cost argument). Learning alone (the default) reads one
+    now and then for them, for their re-identification classifiers: here every image is unreadable, and it tries
+    again only when they are ``learn_all_s`` overdue, not at every step."""
 
     class Frames:
         def __init__(self) -> None:
@@ -166,8 +169,9 @@ def test_fusion_tracker_without_interaction_never_reads_the_camera():
 
     cam = PinholeCamera.looking_at([0.0, -8.0, 5.0], [0.0, 0.0, 0.0], fx=400, fy=400, width=640, height=480)
     frames = Frames()
-    trk = FusionTracker(cam, frames, FusionParams(), {"n_confirm": 2, "n_confirm_interior": 2}, rng=0)
-    for k in range(50):  # standing still, feet 0.2 m apart
+    trk = FusionTracker(cam, frames, FusionParams(learn_all_s=learn_all_s), {"n_confirm": 2, "n_confirm_interior": 2},
+                        rng=0)
+    for k in range(50):  # standing still, feet 0.2 m apart (2 s)
         t = 1_000_000_000 + k * 40_000_000
         dets = []
         for x in (-2.5, 2.5):
@@ -177,7 +181,10 @@ def test_fusion_tracker_without_interaction_never_reads_the_camera():
         states = trk.step(t, dets)
     assert len(states) == 2
     assert all(s.sensors == ("laser",) for s in states)
-    assert frames.read == 0
+    if learn_all_s is None:
+        assert frames.read == 0
+    else:  # at their first steps, and once more after 1.5 s
+        assert 1 <= frames.read <= 2
     assert len(trk.bank) == 0
 
 

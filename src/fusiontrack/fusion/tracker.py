@@ -65,8 +65,9 @@
    votes with copies of its voters frozen when it opened. And (``FusionParams.learn_all_s``) the targets B15 never
    trains, nobody ever near them, learn alone now and then, for re-identification only.
 
-The camera image is converted only when one of these needs it (:class:`~fusiontrack.fusion.frames.LazyFrames`),
-so with no interaction the fused tracker costs what the laser one costs. Each output state names the sensors
+The camera image is converted only when one of these needs it (:class:`~fusiontrack.fusion.frames.LazyFrames`):
+with no interaction, only now and then for the lone targets' learning (``learn_all_s``; None: never, and the fused
+tracker then costs what the laser one costs). Each output state names the sensors
 that confirmed its step: the laser's, plus the camera's when the image was used for that target.
 
 :func:`track_fused` runs it over a recording (laser scans + one camera). The boxes are only as good as the camera's
@@ -256,20 +257,18 @@ class FusionParams:
         re-identification (a lost candidate, or a live alternative): it never votes in an identity check, it
         draws its patches from a random stream of its own, and it is dropped when the target first learns as
         B15's learner (B15's starts afresh), so B15's classifiers and the checks are what they are without it.
-        None (the default): only B15's learners learn (seed 001: the camera is read only for targets that need it).
-        On ``benchmarks/fusion.py`` (crowd + groups, 30 s), 1.5 s with ``reid_min_alone`` 0.25: ID switches
-        17 -> 16 on seeds 0-2 and 22 -> 21 on seeds 3-5 (laser-only: 18, 20), no wrong re-identification added,
-        +0.02-0.10x laser-only's time. Of fusion's 17 switches on seeds 0-2, 9 are swaps between live tracks, 5
-        rebirths after ``lost`` (3 of them without a classifier before this option) and 3 after ``disappear`` at
-        the edge below the camera, out of its view. Off by default: one switch in twenty is within the runs'
-        noise, and it reads the camera for everybody. Over 72 runs (seeds 0-35) and rng 0 / 1 / 2
-        (``train_interval_s`` 0.2): 249 / 239 / 259 ID switches against 253 / 244 / 260 without it, groups IDF1
-        0.915 / 0.922 / 0.910 against 0.914 / 0.915 / 0.910: still within the noise. With today's checks and
-        ``contact_learn_s``, at 1.5 s (72 runs, 30 s, draws 0 / 1): crowd 74 / 73 -> 72 / 72 and groups 21 / 19 ->
-        20 / 19 ID switches, IDF1 within +0.001; only four runs change, each a reborn track re-identified, none for
-        the worse. On ``benchmarks/fusion.py`` (seeds 0-2, ``--fusion learn_all_s=1.5``): ID switches 10 -> 8, IDF1
-        0.959 -> 0.967, and 1.49x -> 1.58x laser-only's time (3.0 s: 1.57x, 9 switches), over seed 001's 1.5x: the
-        cost is the training of everybody's classifiers, not the images read (+3 %).
+        None: only B15's learners learn (seed 001: the camera is read only for targets that need it). Default 1.5 s,
+        since the identity checks date an exchange by the tracks' motion: on ``benchmarks/fusion.py`` (seeds 0-2) it
+        re-identifies the two reborn tracks left (crowd seed 0, groups seed 2), ID switches 6 -> 4 against
+        laser-only's 8 (seed 001's target, at most half, is met with it and not without), IDF1 0.965 -> 0.973; on
+        72 runs (crowd + groups, seeds 0-35, 30 s, draws 0 / 1) crowd 74 / 73 -> 72 / 72 and groups 17 / 15 -> 16 /
+        15 ID switches, four runs changed, each a reborn track re-identified, none for the worse. Its cost: +0.035x
+        laser-only's time (seeds 0-2: 1.43x -> 1.47x, least of 4 runs each). History: 1.5 s with ``reid_min_alone``
+        0.25 first gave ID switches 17 -> 16 on seeds 0-2 and 22 -> 21 on seeds 3-5 (laser-only: 18, 20), within
+        the runs' noise, and over 72 runs and draws 0 / 1 / 2 (``train_interval_s`` 0.2) 249 / 239 / 259 against 253
+        / 244 / 260; it was off by default then, and later (``contact_learn_s``, checks dated at the closest approach)
+        10 -> 8 on seeds 0-2 at 1.49x -> 1.58x laser-only's time (since halved: learning alone computed every
+        target's boxes at every step while a lone person out of the camera's view was overdue).
     reid_min_alone : float or None
         ``reid_min`` for a lost candidate whose classifier learnt alone (``learn_all_s``; fewer, less varied
         training images: its confidence on its own person is lower) [RECON]; None: ``reid_min``.
@@ -333,7 +332,7 @@ class FusionParams:
     reid_frames: int = 3
     reid_min: float = 0.4
     reid_margin: float = 0.3
-    learn_all_s: float | None = None
+    learn_all_s: float | None = 1.5
     reid_min_alone: float | None = 0.25
     height_m: float = 1.70
     width_ratio: float = 0.40
