@@ -18,6 +18,7 @@ from scipy import ndimage
 from sklearn.metrics import roc_auc_score
 from sklearn.tree import DecisionTreeClassifier
 
+from fusiontrack.vision import _cart_jit
 from fusiontrack.vision.appearance import (
     AppearanceBank,
     AppearanceParams,
@@ -303,6 +304,26 @@ def test_numpy_cart_equals_scikit_learn_tree():
         trials += 1
         same += bool((predict_tree(xt, ours) == ref.predict(xt)).all())
     assert same >= 0.85 * trials
+
+
+@pytest.mark.skipif(not _cart_jit.ENABLED, reason="numba off (FUSIONTRACK_NUMBA=0) or missing")
+def test_compiled_split_search_grows_the_numpy_trees_bit_for_bit():
+    """fit_cart's compiled split search (vision/_cart_jit.py) must choose the numpy reference's splits exactly,
+    ties included (values rounded to 0.1 make many equal values and equal Gini proxies): every array of every
+    tree identical, over batches of B15's sizes and shapes (23 features, boosting weights)."""
+    rng = np.random.default_rng(7)
+    for trial in range(80):
+        n, d = int(rng.integers(12, 900)), int(rng.choice([1, 5, 23]))
+        x = rng.normal(size=(n, d)).astype(np.float32)
+        if trial % 2:
+            x = np.round(x, 1)
+        y = np.where(rng.random(n) < rng.uniform(0.1, 0.9), 1, -1)
+        w = rng.random(n) ** 3  # uneven, as after boosting rounds
+        depth, leaf = int(rng.integers(1, 5)), int(rng.integers(1, 9))
+        compiled = fit_cart(x, y, w, depth, leaf, jit=True)
+        reference = fit_cart(x, y, w, depth, leaf, jit=False)
+        for a, b in zip(compiled, reference, strict=True):
+            assert np.array_equal(a, b), trial
 
 
 def test_array_trees_predict_like_scikit_learn():

@@ -42,6 +42,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from sklearn.tree import DecisionTreeClassifier
 
+from . import _cart_jit
 from .patches import (
     FeatureParams,
     IntegralCache,
@@ -356,8 +357,27 @@ def _empty_tree(max_depth: int) -> tuple[np.ndarray, ...]:
             np.zeros(size))
 
 
+def _split_numpy(xs: np.ndarray, wpo: np.ndarray, wno: np.ndarray, sp: float, sn: float, lo: int,
+                 hi: int) -> tuple[int, int]:
+    """:func:`fit_cart`'s split search, vectorised over features and split points (the reference of
+    :func:`fusiontrack.vision._cart_jit.best_split`, which says what it returns)."""
+    cpl = np.cumsum(wpo, axis=1)[:, lo:hi + 1]
+    cnl = np.cumsum(wno, axis=1)[:, lo:hi + 1]
+    cpr, cnr = sp - cpl, sn - cnl
+    wl, wr = cpl + cnl, cpr + cnr
+    with np.errstate(invalid="ignore", divide="ignore"):
+        # Gini proxy: Σ_children Σ_c w_c² / w_child, as in scikit-learn
+        proxy = np.where(wl > 0, (cpl**2 + cnl**2) / wl, 0.0) + np.where(wr > 0, (cpr**2 + cnr**2) / wr, 0.0)
+    valid = xs[:, lo + 1:hi + 2] > xs[:, lo:hi + 1] + 1e-7
+    if not valid.any():
+        return -1, -1
+    proxy[~valid] = -np.inf
+    f, i = np.unravel_index(int(np.argmax(proxy)), proxy.shape)
+    return int(f), int(i)
+
+
 def fit_cart(features: np.ndarray, labels: np.ndarray, weights: np.ndarray, max_depth: int = 3,
-             min_samples_leaf: int = 5) -> tuple[np.ndarray, ...]:
+             min_samples_leaf: int = 5, jit: bool | None = None) -> tuple[np.ndarray, ...]:
     """Fit one weighted CART classification tree (Gini impurity, Breiman et al. 1984), as B14's weak learner.
 
     The same rule as scikit-learn's ``DecisionTreeClassifier(max_depth, min_samples_leaf)`` (features compared as
@@ -372,6 +392,9 @@ def fit_cart(features: np.ndarray, labels: np.ndarray, weights: np.ndarray, max_
     labels : (n,) int in {−1, +1}
     weights : (n,) float >= 0
     max_depth, min_samples_leaf : int
+    jit : bool, optional
+        The split search compiled (:mod:`fusiontrack.vision._cart_jit`, the same splits) or in numpy; default:
+        compiled when numba is there.
 
     Returns
     -------
@@ -379,6 +402,7 @@ def fit_cart(features: np.ndarray, labels: np.ndarray, weights: np.ndarray, max_
         Split feature and threshold (go left when ``x_f <= threshold``), children (−1 at a leaf) and the leaf
         output ±1, node 0 the root; unused nodes are padding.
     """
+    jit = _cart_jit.ENABLED if jit is None else bool(jit) and _cart_jit.ENABLED
     x = np.asarray(features, dtype=np.float32)
     y = np.asarray(labels)
     w = np.asarray(weights, dtype=np.float64)
@@ -402,18 +426,9 @@ def fit_cart(features: np.ndarray, labels: np.ndarray, weights: np.ndarray, max_
             continue
         xs = np.take_along_axis(xt, order, axis=1)
         lo, hi = min_samples_leaf - 1, m - min_samples_leaf - 1  # split after sorted position i in [lo, hi]
-        cpl = np.cumsum(wp[order], axis=1)[:, lo:hi + 1]
-        cnl = np.cumsum(wn[order], axis=1)[:, lo:hi + 1]
-        cpr, cnr = sp - cpl, sn - cnl
-        wl, wr = cpl + cnl, cpr + cnr
-        with np.errstate(invalid="ignore", divide="ignore"):
-            # Gini proxy: Σ_children Σ_c w_c² / w_child, as in scikit-learn
-            proxy = np.where(wl > 0, (cpl**2 + cnl**2) / wl, 0.0) + np.where(wr > 0, (cpr**2 + cnr**2) / wr, 0.0)
-        valid = xs[:, lo + 1:hi + 2] > xs[:, lo:hi + 1] + 1e-7
-        if not valid.any():
+        f, i = (_cart_jit.best_split if jit else _split_numpy)(xs, wp[order], wn[order], sp, sn, lo, hi)
+        if f < 0:  # no two distinct values inside the leaf-size limits
             continue
-        proxy[~valid] = -np.inf
-        f, i = np.unravel_index(int(np.argmax(proxy)), proxy.shape)
         a, b = xs[f, lo + i], xs[f, lo + i + 1]
         thr = a / 2.0 + b / 2.0
         if thr == b or not np.isfinite(thr):
