@@ -271,3 +271,33 @@ def test_raw_records_nobody_takes_are_kept_only_for_keep_ns(simulated):
         got = [t for _, t, _ in raw]
     assert got == [t for t in want if want[-1] - t <= keep_ns]
     assert 1 < len(got) < len(want)
+
+
+def test_the_raw_reader_pauses_rather_than_read_far_ahead_of_the_scans(simulated):
+    """A raw reader that runs ahead (images taken while nobody takes the scans, as when a camera stops sending and
+    its reader looks for the next image) must not read on and queue the rest of the recording's scans: once the
+    scans it has read for the other reader span more than ``keep_ns``, it yields None; when scans are taken it
+    goes on, and every image still comes through, in order."""
+    path = simulated("crowd", seconds=1.5, seed=1)
+    keep_ns = 200_000_000
+    with Recording(path) as rec:
+        lasers = [t for t, i in rec.topic_types().items() if i == "sensor_msgs/msg/LaserScan"]
+        image = rec.image_topic()
+        want = [t for _, t, _ in rec._raw(rec.select([image]))]
+        scan_times = [m.t_ns for m in rec.messages(lasers, time_source="log")]
+        scans, raw = rec.messages_and_raw(lasers, [image], time_source="log", keep_ns=keep_ns)
+        got: list[int] = []
+        taken = 0
+        pauses = 0
+        for item in raw:
+            if item is None:  # paused: the scans read ahead span more than keep_ns
+                pauses += 1
+                assert got
+                assert got[-1] - scan_times[taken] > keep_ns - 100_000_000  # (images come every 67 ms)
+                for _ in range(10):
+                    if next(scans, None) is not None:
+                        taken += 1
+                continue
+            got.append(item[1])
+    assert got == want
+    assert pauses >= 3

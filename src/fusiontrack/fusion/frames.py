@@ -42,7 +42,9 @@ class LazyFrames:
     raw : iterator of (connection, log time, bytes), optional
         The topic's raw records, if the caller reads them (e.g. the second reader of
         :meth:`~fusiontrack.io.Recording.messages_and_raw`, which reads the file once for the scans and the
-        images); by default they are read from ``rec`` here.
+        images); by default they are read from ``rec`` here. ``None`` from it: no record yet (the reader may not
+        read further ahead now); the next image is then taken as not within ``max_dt_ns``, and asked for again
+        at the next call.
 
     Notes
     -----
@@ -64,11 +66,10 @@ class LazyFrames:
         # the tracker never needs are never deserialised (seed 001's "camera read only when needed").
         owners = {id(c): r for r in rec._readers for c in r.connections}
         self._deser = {id(c): owners[id(c)] for c in conns}
-        self._it: Iterator[tuple[Any, int, bytes]] = (
-            (conn, self._stamp(data, t_log, _is_ros1(conn)) + self.correction_ns, data)
-            for conn, t_log, data in (rec._raw(conns) if raw is None else raw))
+        self._it: Iterator[tuple[Any, int, bytes] | None] = rec._raw(conns) if raw is None else raw
+        self._ended = False
         self._prev: tuple[Any, int, bytes] | None = None
-        self._next: tuple[Any, int, bytes] | None = next(self._it, None)
+        self._next: tuple[Any, int, bytes] | None = self._pull()
         self._cache: tuple[int, Image | None] | None = None  # (log time, converted image)
         self.converted = 0  # images converted so far
         self.seen = 0  # images passed so far
@@ -86,9 +87,22 @@ class LazyFrames:
         t = sec * 1_000_000_000 + nsec
         return t if sec > 0 and nsec < 1_000_000_000 else t_log
 
+    def _pull(self) -> tuple[Any, int, bytes] | None:
+        """The next raw image with its stamp, or None: the stream has ended, or has nothing yet (``raw``)."""
+        item = next(self._it, _END)
+        if item is _END:
+            self._ended = True
+            return None
+        if item is None:
+            return None
+        conn, t_log, data = item
+        return conn, self._stamp(data, t_log, _is_ros1(conn)) + self.correction_ns, data
+
     def _advance(self, t_ns: int) -> None:
+        if self._next is None and not self._ended:  # nothing was there yet: look again
+            self._next = self._pull()
         while self._next is not None and self._next[1] <= t_ns:
-            self._prev, self._next = self._next, next(self._it, None)
+            self._prev, self._next = self._next, self._pull()
             self.seen += 1
 
     def nearest_time(self, t_ns: int) -> int | None:
@@ -139,6 +153,9 @@ class LazyFrames:
         if self.unreadable:
             log.warning("%s: %d of the %d images converted were unreadable and skipped (first: %s)", self.topic,
                         self.unreadable, self.converted, self.first_unreadable)
+
+
+_END = object()
 
 
 def _is_ros1(conn: Any) -> bool:

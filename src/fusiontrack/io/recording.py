@@ -582,7 +582,7 @@ class Recording:
     def messages_and_raw(
         self, topics: Iterable[str], raw_topics: Iterable[str], *, time_source: TimeSource = "header",
         keep_ns: int = 2_000_000_000,
-    ) -> tuple[Iterator[Message], Iterator[tuple[Connection, int, bytes]]]:
+    ) -> tuple[Iterator[Message], Iterator[tuple[Connection, int, bytes] | None]]:
         """Two readers of one pass over the recording: the records of ``topics`` converted (as :meth:`messages`
         reads them), and those of ``raw_topics`` as ``(connection, log time, raw bytes)``, unconverted.
 
@@ -591,7 +591,9 @@ class Recording:
         of the other; what one reads ahead for the other waits in memory until taken, but raw records waiting more
         than ``keep_ns`` (log time) behind the newest one read are dropped (the raw reader, e.g.
         :class:`~fusiontrack.fusion.frames.LazyFrames`, wants the records near the other reader's time, not all of
-        them: a camera's images would otherwise pile up while nobody asks for one).
+        them: a camera's images would otherwise pile up while nobody asks for one). Nor does the raw reader read
+        more than ``keep_ns`` ahead of the other: it then yields ``None`` (nothing yet; ask again later) instead of
+        a record.
 
         Raises
         ------
@@ -681,9 +683,17 @@ class Recording:
                         _span_text(max(abs(d) for d in apart.values())))
 
 
+PAUSE = None  # what the raw reader of :meth:`Recording.messages_and_raw` yields when it may not read further yet
+
+
 class _Split:
     """One stream of raw records read by two readers (:meth:`Recording.messages_and_raw`): the records of the
-    ``aside`` connections for one, the others for the other; a record read by one for the other waits in a queue."""
+    ``aside`` connections for one, the others for the other; a record read by one for the other waits in a queue.
+
+    The set-aside reader may not run more than ``keep_ns`` (log time) ahead of the other: when the records it has
+    queued for the other span more, it yields :data:`PAUSE` instead of reading on (a camera that stops sending
+    would otherwise make it read, and queue, the rest of the recording's scans while looking for its next image);
+    asked again later, it goes on from where it stopped."""
 
     def __init__(self, records: Iterator[tuple[Connection, int, bytes]], aside: set[int], keep_ns: int) -> None:
         self._records = records
@@ -693,10 +703,14 @@ class _Split:
             deque(), deque())
         self.dropped = 0  # set-aside records dropped unread (older than keep_ns behind the newest)
 
-    def take(self, aside: bool) -> Iterator[tuple[Connection, int, bytes]]:
+    def take(self, aside: bool) -> Iterator[tuple[Connection, int, bytes] | None]:
         queue = self._queues[aside]
+        other = self._queues[not aside]
         while True:
             while not queue:
+                if aside and other and other[-1][1] - other[0][1] > self._keep_ns:
+                    yield PAUSE
+                    continue
                 item = next(self._records, None)
                 if item is None:
                     return
