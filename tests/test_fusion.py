@@ -693,6 +693,25 @@ def test_an_exchange_is_dated_where_the_laser_tracks_jumped_onto_each_others_per
     assert r.to_ns == t0 + 17 * dt  # decided on the second image
 
 
+@pytest.mark.parametrize("jump", [5, None])
+def test_exchange_dating_ignores_unknown_velocities_and_gaps_in_the_contact(jump):
+    """``_exchange_date`` over a pair walking side by side (0.5 m apart, 1 m/s, 40 ms steps): with the tracks
+    jumping onto each other's person at step 5 it dates the exchange there, else it falls back to the closest
+    approach the check recorded. A velocity the tracker did not know (NaN) at step 14 is no evidence either way
+    (``argmax`` would take the NaN), and neither is a window across a gap in the contact (steps 20-30 missing:
+    the tracks come back after it where the other was)."""
+    from fusiontrack.fusion.tracker import _Check, _exchange_date
+
+    c = _Check(swap_from_ns=123, closest_m=0.4, near_ns=0, voters=frozenset({1, 2}))
+    steps = [k for k in range(40) if not 20 <= k < 30]
+    for k in steps:
+        x = 0.04 * k
+        ya, yb = (0.5, 0.0) if (jump is not None and k >= jump) or k >= 30 else (0.0, 0.5)
+        va = [np.nan, np.nan] if k == 14 else [1.0, 0.0]
+        c.path.append((k * 40_000_000, np.array([[x, ya, *va], [x, yb, 1.0, 0.0]])))
+    assert _exchange_date(c) == (123 if jump is None else jump * 40_000_000)
+
+
 def test_evidence_from_before_the_closest_approach_does_not_outvote_an_exchange_there():
     """Two tracks walk side by side 0.7 m apart while weak classifiers (mean evidence 0.5, under check_margin 0.6)
     find each on its own person for six images: the check stays open. The tracks then come within 0.2 m, out of the

@@ -84,6 +84,7 @@ import itertools
 import logging
 import math
 import time
+from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -616,8 +617,9 @@ class _Check:
     image_ns: int = -1  # the last image that gave evidence
     decided: bool = False  # decided since the pair's last contact: waits for the next contact
     exchanged: bool = False  # an exchange was decided: the pair's later checks keep these voters
-    path: list[tuple[int, np.ndarray]] = field(default_factory=list)  # (t_ns, the pair's (2, 4) states: x, y, vx,
-    # vy) on the steps they were in contact since the check opened: where the laser tracks may have been exchanged
+    path: deque[tuple[int, np.ndarray]] = field(default_factory=lambda: deque(maxlen=DATE_PATH_STEPS))  # (t_ns,
+    # the pair's (2, 4) states: x, y, vx, vy) on the steps they were in contact since the check opened (the last
+    # DATE_PATH_STEPS): where the laser tracks may have been exchanged
 
 
 @dataclass(slots=True)
@@ -665,6 +667,8 @@ def relabel_states(states: Sequence[TrackState], relabels: Sequence[Relabel]) ->
 
 DATE_WINDOW_S = 0.2  # half-width of the window in which an exchange of two laser tracks is looked for
 DATE_GAIN_M = 0.1  # how much better, in metres, the exchanged tracks must continue each other's motion
+DATE_GAP_NS = 100_000_000  # steps further apart than this in a check's path: the pair was out of contact between
+DATE_PATH_STEPS = 1500  # a check's path keeps the pair's last contact steps (a minute at 25 Hz), not all of them
 
 
 def _exchange_date(c: _Check) -> int:
@@ -687,7 +691,8 @@ def _exchange_date(c: _Check) -> int:
     lo = np.searchsorted(t, t - w)
     hi = np.searchsorted(t, t + w, side="right") - 1
     span = (t[hi] - t[lo]) * 1e-9
-    ok = (span >= DATE_WINDOW_S) & (span <= 3 * DATE_WINDOW_S)  # a full window, not across a gap in the contact
+    stretch = np.r_[0, np.cumsum(np.diff(t) > DATE_GAP_NS)]  # stretches of contact, split where steps are missing
+    ok = (span >= DATE_WINDOW_S) & (stretch[lo] == stretch[hi])  # a full window, not across a gap in the contact
     if not ok.any():
         return c.swap_from_ns
     lo, hi, span = lo[ok], hi[ok], span[ok]
@@ -695,14 +700,15 @@ def _exchange_date(c: _Check) -> int:
     after = x[hi, :, :2]
     own = np.linalg.norm(after - pred, axis=2).sum(axis=1)
     crossed = np.linalg.norm(after[:, ::-1] - pred, axis=2).sum(axis=1)
-    gain = own - crossed
+    gain = np.where(np.isfinite(own - crossed), own - crossed, -np.inf)  # (a velocity unknown: no evidence)
     k = int(np.argmax(gain))
-    if gain[k] <= DATE_GAIN_M:
+    if not gain[k] > DATE_GAIN_M:
         return c.swap_from_ns
     j = np.arange(lo[k] + 1, hi[k] + 1)  # the step within it where exchanging the tracks from on shortens most
     step_pred = x[j - 1, :, :2] + x[j - 1, :, 2:] * ((t[j] - t[j - 1]) * 1e-9)[:, None, None]
     step_gain = (np.linalg.norm(x[j, :, :2] - step_pred, axis=2).sum(axis=1)
                  - np.linalg.norm(x[j, ::-1, :2] - step_pred, axis=2).sum(axis=1))
+    step_gain = np.where(np.isfinite(step_gain), step_gain, -np.inf)
     return int(t[j[int(np.argmax(step_gain))]])
 
 
@@ -1309,7 +1315,8 @@ class FusionTracker:
                 # A check without voters is (re)opened at each contact until one of the two has a classifier.
                 # (a classifier that learnt alone, ``learn_all_s``, never saw a person near its own: no voter)
                 voters = frozenset(tid for tid in pair if self.bank.is_trained(tid) and tid not in self._alone)
-                checks[pair] = _Check(t_ns, dist, t_ns, voters, path=[(t_ns, self._pair_state(states, row, pair))])
+                checks[pair] = _Check(t_ns, dist, t_ns, voters)
+                checks[pair].path.append((t_ns, self._pair_state(states, row, pair)))
                 if p.contact_learn_s is not None:  # the voters go on learning; their votes are the classifiers of
                     # now (or of the opening of another check of theirs still undecided, which may hold the person)
                     for tid in voters:
@@ -1319,8 +1326,8 @@ class FusionTracker:
             if c.decided:  # a decided pair still or again in contact: checked again, by the same voters (a
                 # classifier first trained during the contact, e.g. of a track born beside the other, may have
                 # learnt the other person under its id); new voters only once the check is dropped (check_s apart)
-                checks[pair] = _Check(t_ns, dist, c.near_ns, c.voters, exchanged=c.exchanged,
-                                      path=[(t_ns, self._pair_state(states, row, pair))])
+                checks[pair] = _Check(t_ns, dist, c.near_ns, c.voters, exchanged=c.exchanged)
+                checks[pair].path.append((t_ns, self._pair_state(states, row, pair)))
                 continue
             if dist < c.closest_m:  # an exchange, if any, most likely happened where the two tracks came closest;
                 # the evidence gathered before it was of the identities before it: it would dilute the evidence of
@@ -1776,15 +1783,18 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
                     timings.setdefault("bias_s", []).append(bias.seconds)
         frames: Any = None
         lazy: LazyFrames | None = None
-        if camera is not None:  # one pass over the recording for the scans and the images (the file's chunks
-            # hold both: read for each, every chunk was read twice)
+        images = None
+        if camera is not None and len(rec.paths) == 1:  # one pass over the file for the scans and the images (its
+            # chunks hold both: read for each, every chunk was read twice). Not over several files: their log
+            # clocks may differ by seconds, and the pass keeps the images nobody took by log time
             scans, images = rec.messages_and_raw(lasers, [image_topic], time_source=time_source)
+        else:
+            scans = rec.messages(lasers, time_source=time_source)
+        if camera is not None:
             frames = lazy = LazyFrames(rec, image_topic, round(p.max_frame_dt_s * 1e9),
                                        corrections.get(cam_sensor, 0), raw=images)
             if frames_wrapper is not None:
                 frames = frames_wrapper(frames)
-        else:
-            scans = rec.messages(lasers, time_source=time_source)
         auto_area = isinstance(area_m, str)
         if auto_area and area_m != "auto":
             raise ConfigError(f"area_m: expected 'auto', None, a rectangle or a polygon, got {area_m!r}")
