@@ -188,6 +188,39 @@ def test_fusion_tracker_without_interaction_reads_the_camera_only_to_learn_alone
     assert len(trk.bank) == 0
 
 
+def test_a_lone_person_out_of_view_does_not_cost_everyone_s_boxes_at_every_step(monkeypatch):
+    """Learning alone: a lone person behind the camera stays overdue (their box is never in view), and so does one
+    alone in view (no other person in the image to learn against); the boxes' overlaps of everybody were worked
+    out at every step for nothing (49 times in these 2 s). Two lone people, one in view and one behind the camera:
+    nobody learns, and the full boxes are never needed."""
+    cam = PinholeCamera.looking_at([0.0, -8.0, 5.0], [0.0, 0.0, 0.0], fx=400, fy=400, width=640, height=480)
+
+    class Frames:
+        def nearest_time(self, t_ns: int) -> int | None:
+            return t_ns
+
+        def at(self, t_ns: int):
+            return None
+
+    trk = FusionTracker(cam, Frames(), FusionParams(learn_all_s=1.5), {"n_confirm": 2, "n_confirm_interior": 2},
+                        rng=0)
+    calls: list[int] = []
+    orig = FusionTracker._clear_boxes
+    monkeypatch.setattr(FusionTracker, "_clear_boxes", lambda self, pos: calls.append(1) or orig(self, pos))
+    for k in range(50):
+        t = 1_000_000_000 + k * 40_000_000
+        dets = []
+        for y in (0.0, -12.0):  # in view; 4 m behind the camera
+            feet = np.array([[-0.1, y], [0.1, y]])
+            dets.append(Detection(t, "laser", position_m=feet.mean(axis=0), features={
+                "feet_m": feet, "inter_feet_m": np.asarray(0.2), "one_foot": np.asarray(False)}))
+        states = trk.step(t, dets)
+    assert len(states) == 2
+    assert len(trk.bank) == 0
+    assert trk.stats.train_alone == 0
+    assert not calls
+
+
 def test_relabel_states_swaps_only_inside_each_window_in_decision_order():
     from fusiontrack.types import TrackState
 

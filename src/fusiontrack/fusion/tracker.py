@@ -1222,19 +1222,19 @@ class FusionTracker:
         if t_img is None:
             return
         t0 = time.perf_counter()
-        shape = (self.camera.height, self.camera.width)
-        if not anyway and p.check_visible > 0:  # only the overdue may read an image: if none of their boxes is in
-            # view (a lone person out of the camera's view stays overdue), nobody learns, whatever the others' boxes
-            overdue = np.array([k for k in rows if since[k] >= every])
-            own = self.camera.person_box(pos[overdue], p.height_m, p.width_ratio)
-            if not (box_visibility(own, shape) >= p.check_visible).any():
-                self.stats.camera_s += time.perf_counter() - t0
-                return
+        # first the cheap reasons to stop, before the boxes' overlaps (a lone person out of the camera's view, or
+        # alone in it, stays overdue: otherwise every target's boxes were worked out at every step for nothing)
+        all_boxes = self.camera.person_box(pos, p.height_m, p.width_ratio)
+        vis = box_visibility(all_boxes, (self.camera.height, self.camera.width))
+        seen = np.isfinite(all_boxes).all(axis=1) & (vis >= self.bank.params.patches.min_visible)
+        overdue = [k for k in rows if since[k] >= every]
+        if np.count_nonzero(seen) < 2 or not (anyway or p.check_visible <= 0
+                                              or (vis[overdue] >= p.check_visible).any()):
+            self.stats.camera_s += time.perf_counter() - t0
+            return
         boxes, ok, clear = self._clear_boxes(pos)
-        vis = box_visibility(boxes, shape)
         learners = [k for k in rows if clear[k]]
-        seen = ok & (vis >= self.bank.params.patches.min_visible)
-        if not learners or np.count_nonzero(seen) < 2 or not (anyway or (since[learners] >= every).any()):
+        if not learners or not (anyway or (since[learners] >= every).any()):
             self.stats.camera_s += time.perf_counter() - t0
             return
         img = self._image(t_ns)
