@@ -224,6 +224,15 @@ def test_a_topic_never_stamped_beside_topics_on_another_clock_is_warned_of(tmp_p
     assert not [r for r in caplog.records if "two clocks" in r.getMessage()]
 
 
+def _lasers_and_camera(rec: Recording) -> tuple[list[str], str]:
+    """A simulated recording's laser topics and its camera's image topic."""
+    lasers = [t for t, i in rec.topic_types().items() if i == "sensor_msgs/msg/LaserScan"]
+    image = rec.image_topic()
+    assert lasers
+    assert image
+    return lasers, image
+
+
 @pytest.mark.parametrize("order", ["scans first", "images first", "alternate"])
 def test_one_pass_for_scans_and_raw_images_reads_what_two_passes_read(simulated, order):
     """``messages_and_raw``: one pass over a simulated recording (lasers and a camera sharing the file's chunks)
@@ -231,10 +240,7 @@ def test_one_pass_for_scans_and_raw_images_reads_what_two_passes_read(simulated,
     :meth:`Recording.messages`, and every image's raw record in log-time order."""
     path = simulated("crowd", seconds=1.5, seed=1)
     with Recording(path) as rec:
-        lasers = [t for t, i in rec.topic_types().items() if i == "sensor_msgs/msg/LaserScan"]
-        image = rec.image_topic()
-        assert lasers
-        assert image
+        lasers, image = _lasers_and_camera(rec)
         want_scans = list(rec.messages(lasers))
         want_raw = [(c.topic, t, bytes(d)) for c, t, d in rec._raw(rec.select([image]))]
         assert len(want_raw) >= 10
@@ -263,8 +269,7 @@ def test_raw_records_nobody_takes_are_kept_only_for_keep_ns(simulated):
     path = simulated("crowd", seconds=1.5, seed=1)
     keep_ns = 300_000_000
     with Recording(path) as rec:
-        lasers = [t for t, i in rec.topic_types().items() if i == "sensor_msgs/msg/LaserScan"]
-        image = rec.image_topic()
+        lasers, image = _lasers_and_camera(rec)
         want = [t for _, t, _ in rec._raw(rec.select([image]))]
         scans, raw = rec.messages_and_raw(lasers, [image], keep_ns=keep_ns)
         assert sum(1 for _ in scans) > 0
@@ -281,8 +286,7 @@ def test_the_raw_reader_pauses_rather_than_read_far_ahead_of_the_scans(simulated
     path = simulated("crowd", seconds=1.5, seed=1)
     keep_ns = 200_000_000
     with Recording(path) as rec:
-        lasers = [t for t, i in rec.topic_types().items() if i == "sensor_msgs/msg/LaserScan"]
-        image = rec.image_topic()
+        lasers, image = _lasers_and_camera(rec)
         want = [t for _, t, _ in rec._raw(rec.select([image]))]
         scan_times = [m.t_ns for m in rec.messages(lasers, time_source="log")]
         scans, raw = rec.messages_and_raw(lasers, [image], time_source="log", keep_ns=keep_ns)
