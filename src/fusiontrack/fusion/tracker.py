@@ -79,6 +79,7 @@ camera; without a usable camera it tracks with the lasers alone.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import itertools
 import logging
@@ -1734,7 +1735,7 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         raise ConfigError(f"adaptive_bias: expected a bool, BiasLearning or BiasParams, got {adaptive_bias!r}")
     corrections = dict(clock_corrections_ns or {})
     first_path = path if isinstance(path, str | Path) else next(iter(path), None)
-    with Recording(path) as rec, opencv_threads(1):
+    with Recording(path) as rec, contextlib.ExitStack() as stack, opencv_threads(1):
         info = rec.topic_types()
         lasers = [t for t, i in info.items() if i == LASERSCAN] if topics is None else list(topics)
         if not lasers:
@@ -1790,9 +1791,11 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
             scans, images = rec.messages_and_raw(lasers, [image_topic], time_source=time_source)
         else:
             scans = rec.messages(lasers, time_source=time_source)
-        if camera is not None:
-            frames = lazy = LazyFrames(rec, image_topic, round(p.max_frame_dt_s * 1e9),
-                                       corrections.get(cam_sensor, 0), raw=images)
+        if camera is not None:  # (over several files, the images are read by a Recording of their own: two
+            # streams at once through one reader are not safe in every storage)
+            frames = lazy = LazyFrames(rec if images is not None else stack.enter_context(Recording(path)),
+                                       image_topic, round(p.max_frame_dt_s * 1e9), corrections.get(cam_sensor, 0),
+                                       raw=images)
             if frames_wrapper is not None:
                 frames = frames_wrapper(frames)
         auto_area = isinstance(area_m, str)
