@@ -264,8 +264,9 @@ class FusionParams:
         re-identifies the two reborn tracks left (crowd seed 0, groups seed 2), ID switches 6 -> 4 against
         laser-only's 8 (seed 001's target, at most half, is met with it and not without), IDF1 0.965 -> 0.973; on
         72 runs (crowd + groups, seeds 0-35, 30 s, draws 0 / 1) crowd 74 / 73 -> 72 / 72 and groups 17 / 15 -> 16 /
-        15 ID switches, four runs changed, each a reborn track re-identified, none for the worse. Its cost: +0.035x
-        laser-only's time (seeds 0-2: 1.43x -> 1.47x, least of 4 runs each). History: 1.5 s with ``reid_min_alone``
+        15 ID switches, four runs changed, each a reborn track re-identified, none for the worse. Its cost, when it
+        became the default: +0.035x laser-only's time (seeds 0-2: 1.43x -> 1.47x, least of 4 runs each; less since
+        the lone targets that cannot learn are passed over cheaply). History: 1.5 s with ``reid_min_alone``
         0.25 first gave ID switches 17 -> 16 on seeds 0-2 and 22 -> 21 on seeds 3-5 (laser-only: 18, 20), within
         the runs' noise, and over 72 runs and draws 0 / 1 / 2 (``train_interval_s`` 0.2) 249 / 239 / 259 against 253
         / 244 / 260; it was off by default then, and later (``contact_learn_s``, checks dated at the closest approach)
@@ -915,16 +916,19 @@ class FusionTracker:
             return np.full((len(positions_m), 4), np.nan)
         return self.camera.person_box(positions_m, self.params.height_m, self.params.width_ratio)
 
-    def _clear_boxes(self, positions_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _clear_boxes(self, positions_m: np.ndarray, boxes: np.ndarray | None = None,
+                     visibility: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(boxes, finite, clear): B11's boxes at ``positions_m``, which are finite, and which a classifier can
         judge: finite, mostly inside the image (``check_visible``) and not largely inside another box
-        (``max_overlap``)."""
+        (``max_overlap``). ``boxes`` and their ``visibility`` (:func:`box_visibility`): if the caller has them."""
         p = self.params
-        boxes = self._boxes(positions_m)
+        boxes = self._boxes(positions_m) if boxes is None else boxes
         finite = np.isfinite(boxes).all(axis=1)
         clear = finite & (_occlusion(boxes, finite) <= p.max_overlap)  # largest fraction inside another box
         if p.check_visible > 0 and self.camera is not None:
-            clear &= box_visibility(boxes, (self.camera.height, self.camera.width)) >= p.check_visible
+            if visibility is None:
+                visibility = box_visibility(boxes, (self.camera.height, self.camera.width))
+            clear &= visibility >= p.check_visible
         return boxes, finite, clear
 
     def _depths(self, positions_m: Mapping[int, np.ndarray]) -> dict[int, float] | None:
@@ -1233,7 +1237,7 @@ class FusionTracker:
                                               or (vis[overdue] >= p.check_visible).any()):
             self.stats.camera_s += time.perf_counter() - t0
             return
-        boxes, ok, clear = self._clear_boxes(pos)
+        boxes, ok, clear = self._clear_boxes(pos, all_boxes, vis)
         learners = [k for k in rows if clear[k]]
         if not learners or not (anyway or (since[learners] >= every).any()):
             self.stats.camera_s += time.perf_counter() - t0

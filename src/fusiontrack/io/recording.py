@@ -701,7 +701,6 @@ class _Split:
         self._keep_ns = int(keep_ns)
         self._queues: tuple[deque[tuple[Connection, int, bytes]], deque[tuple[Connection, int, bytes]]] = (
             deque(), deque())
-        self.dropped = 0  # set-aside records dropped unread (older than keep_ns behind the newest)
 
     def take(self, aside: bool) -> Iterator[tuple[Connection, int, bytes] | None]:
         queue = self._queues[aside]
@@ -720,7 +719,6 @@ class _Split:
                     waiting = self._queues[True]
                     while len(waiting) > 1 and item[1] - waiting[0][1] > self._keep_ns:
                         waiting.popleft()
-                        self.dropped += 1
             yield queue.popleft()
 
 
