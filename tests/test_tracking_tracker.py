@@ -588,7 +588,10 @@ def test_crowd_tracked_end_to_end(crowd20, crowd20_pf) -> None:
     m = evaluate_floor(gt, states, 0.5)
     assert m.mota > MOTA_FLOOR_PF, m.mota
     assert m.idf1 > 0.75
-    assert len(timings["track_s"]) == len(timings["detect_s"]) > 900
+    assert len(timings["track_s"]) == len(timings["detect_s"]) == len(timings["t_ns"]) > 900
+    steps = np.asarray(timings["t_ns"])  # one time per step, in order, and every state's among them
+    assert np.all(np.diff(steps) > 0)
+    assert np.isin([s.t_ns for s in states], steps).all()
     kinds = {e.kind for e in events}
     assert {"appear", "disappear", "merge", "split", "correlated"} <= kinds
     assert all(s.sensor == "laser" and s.cls == "person" for s in states[:100])

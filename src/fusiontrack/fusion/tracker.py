@@ -1698,8 +1698,8 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         As for ``track_recording``: the laser backgrounds learnt first from the recording's first scans (default),
         or online only; the bias pass's own laser backgrounds likewise (:func:`learn_camera_bias`).
     timings : dict, optional
-        Filled with per-step ``"detect_s"`` and ``"track_s"`` (laser tracker + camera side + classification),
-        and ``"bias_s"`` (one value: the bias learning).
+        Filled with per-step ``"detect_s"`` and ``"track_s"`` (laser tracker + camera side + classification; wall
+        time) and ``"t_ns"`` (the step's time), and ``"bias_s"`` (one value: the bias learning).
     frames_wrapper : callable, optional
         Wraps the camera's :class:`~fusiontrack.fusion.frames.LazyFrames` (e.g. to simulate a blackout).
 

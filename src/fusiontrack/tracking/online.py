@@ -181,6 +181,7 @@ class OnlineLaserTracker:
         if self._timings is not None:
             self._timings.setdefault("detect_s", []).append(self._t_det + (t1 - t0))
             self._timings.setdefault("track_s", []).append(t3 - t2)
+            self._timings.setdefault("t_ns", []).append(t)
         self._t_det = 0.0
         self._pending_t = None
         return states

@@ -2133,7 +2133,8 @@ def track_recording(path: str | Path | Sequence[str | Path], *, tracker: str = "
     rng : Generator or int
     world_frame : str
     timings : dict, optional
-        Filled with per-step lists ``"detect_s"`` (detector update + detect) and ``"track_s"`` (tracker step).
+        Filled with per-step lists ``"detect_s"`` (detector update + detect) and ``"track_s"`` (tracker step), wall
+        time, and ``"t_ns"`` (the step's time).
     background : ``"prime"``, ``"learn"`` or ``"none"``
         ``"prime"`` (default): fixed scanners; each scanner's background is first learnt from the recording's
         first ``n_init`` scans (read ahead, :meth:`~fusiontrack.laser.LaserPeopleDetector.prime`), so people
