@@ -12,7 +12,7 @@ import pytest
 from fusiontrack.errors import ConfigError
 from fusiontrack.eval import evaluate_floor
 from fusiontrack.geometry import pose2d_to_matrix
-from fusiontrack.io.recording import Recording
+from fusiontrack.io.recording import LASERSCAN, Recording
 from fusiontrack.laser import LaserPeopleDetector
 from fusiontrack.sim.agents import feet_positions
 from fusiontrack.sim.laser import cast_rays
@@ -577,8 +577,12 @@ def crowd20_pf(crowd20) -> tuple[list, list, dict[str, list[float]]]:
     same seed gives the same tracks, so the tests that need it share one run."""
     path, bounds, corrections, _gt = crowd20
     timings: dict[str, list[float]] = {}
-    states, events = track_recording(path, params={"lateral_m": 0.2}, area_m=bounds,
-                                     clock_corrections_ns=corrections, timings=timings)
+    done: list[float] = []
+    with pytest.MonkeyPatch.context() as mp:  # no pass over the whole recording for its topics' spans first
+        mp.setattr(Recording, "topics", lambda self: pytest.fail("Recording.topics read the recording once more"))
+        states, events = track_recording(path, params={"lateral_m": 0.2}, area_m=bounds,
+                                         clock_corrections_ns=corrections, timings=timings, progress=done.append)
+    timings["progress"] = done
     return states, events, timings
 
 
@@ -589,6 +593,9 @@ def test_crowd_tracked_end_to_end(crowd20, crowd20_pf) -> None:
     assert m.mota > MOTA_FLOOR_PF, m.mota
     assert m.idf1 > 0.75
     assert len(timings["track_s"]) == len(timings["detect_s"]) == len(timings["t_ns"]) > 900
+    with Recording(crowd20[0]) as rec:  # the progress counts the scans read against all the recording's scans
+        n_scans = sum(1 for _ in rec.messages([t for t, m in rec.topic_types().items() if m == LASERSCAN]))
+    assert timings["progress"] == [*(k / n_scans for k in range(100, n_scans + 1, 100)), 1.0]
     steps = np.asarray(timings["t_ns"])  # one time per step, in order, and every state's among them
     assert np.all(np.diff(steps) > 0)
     assert np.isin([s.t_ns for s in states], steps).all()

@@ -164,7 +164,9 @@ def crossing(simulated) -> dict:
     out = simulated("crossing", seconds=10, seed=0)  # three people meet at ~7.5 s; test_vision_appearance_sim.py's too
     with Recording(out) as rec:
         truth = list(rec.messages(["/ground_truth/camera_0"]))
-    states, events, stats = track_camera(out)
+    with pytest.MonkeyPatch.context() as mp:  # no pass over the whole recording for its topics' spans first
+        mp.setattr(Recording, "topics", lambda self: pytest.fail("Recording.topics read the recording once more"))
+        states, events, stats = track_camera(out)
     gt = camera_truth_boxes(truth, stats.width, stats.height)
     metrics = evaluate_boxes(gt, mot_of(states, stats.frame_of()), preprocess=True, n_frames=stats.n_frames)
     return {"path": out, "truth": truth, "states": states, "events": events, "stats": stats, "metrics": metrics}
@@ -215,8 +217,9 @@ def test_overlay_draws_each_track_in_its_colour(crossing, tmp_path):
     out = tmp_path / "overlay.mp4"
     states, _, stats = track_camera(crossing["path"], overlay=out, max_frames=120)
     assert stats.n_frames == 120
-    with VideoReader(out) as video:
+    with VideoReader(out) as video, Recording(crossing["path"]) as rec:
         assert video.frame_count == 120
+        assert video.fps == pytest.approx(rec.topics()[rec.image_topic()].rate_hz, rel=1e-3)  # the camera's rate
         frame = next(im for k, im in enumerate(video) if k == 110).bgr().astype(int)
     t = stats.frame_times_ns[110]
     shown = [s for s in states if s.t_ns == t and s.sensors]

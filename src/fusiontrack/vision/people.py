@@ -810,7 +810,7 @@ class _Frames:
             self._video = VideoReader(paths[0])
             self.sensor = self._video.sensor
             self.count = self._video.frame_count
-            self.fps = self._video.fps
+            self._fps: float | None = self._video.fps
             self.width, self.height = self._video.width, self._video.height
             if camera == "auto":
                 self.camera = None
@@ -819,10 +819,11 @@ class _Frames:
         self._rec = Recording(paths)
         try:
             self.topic = self._rec.image_topic(topic=camera_topic)
-            info = self._rec.topics()[self.topic]
             self.sensor = self._rec.sensor_of(self.topic)
-            self.count = info.count
-            self.fps = info.rate_hz if info.rate_hz > 0 else 10.0
+            # the count from the connections (index or metadata); the rate, which needs the topic's span (a pass over
+            # the whole recording, Recording.topics), only if an overlay video asks for it
+            self.count = sum(c.msgcount for c in self._rec.connections if c.topic == self.topic)
+            self._fps = None
             self._time_source = time_source
             first = next((m for m in self._rec.messages([self.topic], time_source=time_source)
                           if isinstance(m, Image)), None)
@@ -834,6 +835,14 @@ class _Frames:
         except BaseException:
             self._rec.close()
             raise
+
+    @property
+    def fps(self) -> float:
+        """The video's frame rate, or the image topic's mean rate (10 for fewer than two images)."""
+        if self._fps is None:
+            rate = self._rec.topics()[self.topic].rate_hz
+            self._fps = rate if rate > 0 else 10.0
+        return self._fps
 
     def __iter__(self) -> Iterator[Image]:
         if self._video is not None:
