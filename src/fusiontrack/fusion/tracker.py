@@ -1779,9 +1779,9 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
                                        clock_corrections_ns=laser_corrections))
         bias = None
         if camera is not None and learning is not None and first_path is not None:
-            # one file: the bias pass reads through rec (opened once), before the tracking pass
+            # the bias pass reads through rec (all the files, opened once), before the tracking pass
             bias = _learn_bias(first_path, cam_sensor, image_topic, camera, poses, learning, corrections,
-                               world_frame, background, rec if first_path is path else None)
+                               world_frame, background, rec)
             if bias is not None:
                 camera = bias.corrected_camera
                 if timings is not None:
