@@ -259,6 +259,38 @@ def test_calibration_edges_name_the_problem(scene, tmp_path):
     assert new.sensors["camera_0"].pose.z == 3.0
 
 
+def test_a_reference_laser_without_a_pose_is_posed_by_the_recording(scene, tmp_path):
+    """The README's `calibrate --points --reference laser_0 --recording`: a laser the pipeline file gives no pose keeps
+    its recording's (/tf_static, as tracking poses it). Here the recording poses laser_0 where the pipeline file of the
+    other tests does, so the camera comes out where it truly is; without the recording's pose it is an error."""
+    from fusiontrack.geometry import matrix_to_quat
+    from fusiontrack.io.writer import RecordingWriter
+    from fusiontrack.types import CameraInfo, LaserScan, Transform
+
+    pipeline = tmp_path / "pipeline.toml"
+    pipeline.write_text(PIPELINE.replace("pose = { x = -9.6, y = -7.1, z = 0.2, yaw_deg = 37.0 }\n", ""),
+                        encoding="utf-8")
+    csv = tmp_path / "points.csv"
+    rows = "\n".join(",".join(f"{v:.6f}" for v in row) for row in np.hstack([scene["points"], scene["pixels"]]))
+    csv.write_text("x_m,y_m,z_m,u_px,v_px\n" + rows + "\n", encoding="utf-8")
+    for posed in (True, False):
+        rec = tmp_path / f"rec_{posed}"
+        with RecordingWriter(rec) as w:
+            w.write(CameraInfo(10**9, "camera_0", "camera_0", 640, 480, K, DIST), topic="/camera_0/camera_info")
+            if posed:
+                w.write(Transform(10**9, "/tf_static", "world", "laser_0_frame", LASER2WORLD[:3, 3],
+                                  matrix_to_quat(LASER2WORLD[:3, :3]), True))
+            w.write(LaserScan(10**9, "laser_0", "laser_0_frame", -1.5, 0.01, 0.1, 30.0, np.full(301, 5.0)),
+                    topic="/laser_0/scan")
+        if not posed:
+            with pytest.raises(ConfigError, match=r"reference 'laser_0' has no pose in the pipeline file, nor in"):
+                calibrate_from_points(pipeline, "camera_0", csv, reference="laser_0", recording=rec, write=False)
+            continue
+        report = calibrate_from_points(pipeline, "camera_0", csv, reference="laser_0", recording=rec)
+        np.testing.assert_allclose(report.cam2world, scene["camera"].cam2world, atol=1e-5)
+        assert "posed by" in pipeline.read_text(encoding="utf-8")  # the written comment says where it came from
+
+
 def test_rewriting_a_pose_keeps_the_files_permissions_and_a_link(tmp_path):
     """The pose is written atomically through a temporary file: the file keeps its mode (it became 0600) and a
     pipeline file that is a symlink stays one, its target rewritten (the link was replaced by a copy)."""

@@ -140,17 +140,35 @@ def _camera_sensor(cfg: PipelineConfig, camera: str, source: str) -> Pose:
     return sensor.pose
 
 
-def _reference2world(cfg: PipelineConfig, reference: str, source: str) -> np.ndarray:
+def _reference2world(cfg: PipelineConfig, reference: str, source: str,
+                     recording: str | Path | None = None) -> tuple[np.ndarray, str]:
+    """The reference's pose in the world and where it came from: the pipeline file, else (a laser) the recording's
+    ``/tf_static`` as the trackers pose it."""
     if reference == "world":
-        return np.eye(4)
+        return np.eye(4), "world"
     sensor = cfg.sensors.get(reference)
     if sensor is None:
         raise ConfigError(f"{source}: reference {reference!r} is neither 'world' nor a sensor; sensors: "
                           f"{sorted(cfg.sensors)}")
-    if not sensor.has_pose:  # Pose() would silently put it at the origin
-        raise ConfigError(f"{source}: reference {reference!r} has no pose in the pipeline file: give its "
-                          f"[sensors.{reference}] a pose, or measure the points in the world frame")
-    return sensor.pose.matrix()
+    if sensor.has_pose:
+        return sensor.pose.matrix(), "the pipeline file"
+    # Pose() would silently put it at the origin: a laser without a pose keeps its recording's, as tracking poses it
+    if recording is not None and sensor.kind == SensorKind.LASER:
+        from fusiontrack.laser.detector import first_scans, recorded_laser_poses
+
+        with Recording(recording) as rec:
+            if sensor.topic not in rec.topic_types():
+                raise ConfigError(f"{source}: reference {reference!r} has no pose in the pipeline file, and its topic "
+                                  f"{sensor.topic} is not in {recording}")
+            poses = recorded_laser_poses(rec, first_scans(rec, [sensor.topic]))
+        if poses:
+            return next(iter(poses.values())), f"{recording}'s /tf_static"
+        raise ConfigError(f"{source}: reference {reference!r} has no pose in the pipeline file, nor in {recording}'s "
+                          f"/tf_static: give its [sensors.{reference}] a pose, or measure the points in the world "
+                          "frame")
+    tf_hint = ", or a recording with its /tf_static (--recording)" if sensor.kind == SensorKind.LASER else ""
+    raise ConfigError(f"{source}: reference {reference!r} has no pose in the pipeline file: give its "
+                      f"[sensors.{reference}] a pose{tf_hint}, or measure the points in the world frame")
 
 
 def _finish(pipeline: Path, camera: str, method: str, cam2world: np.ndarray, previous: Pose, write: bool,
@@ -201,7 +219,7 @@ def calibrate_from_points(pipeline: str | Path, camera: str, points: str | Path,
     pipeline = Path(pipeline)
     cfg = load_config(pipeline)
     previous = _camera_sensor(cfg, camera, str(pipeline))
-    ref2world = _reference2world(cfg, reference, str(pipeline))
+    ref2world, posed_by = _reference2world(cfg, reference, str(pipeline), recording)
     if intrinsics is None:
         if recording is None:
             raise ConfigError("intrinsics: give the camera's intrinsics or a recording with its CameraInfo")
@@ -215,7 +233,8 @@ def calibrate_from_points(pipeline: str | Path, camera: str, points: str | Path,
     if result.rms_px > ransac_threshold_px:
         log.warning("%s: reprojection RMS %.1f px is large: check the control points", points, result.rms_px)
     cam2world = result.cam2world(ref2world)
-    comment = (f"fusiontrack calibrate: {int(result.inliers.sum())}/{len(pts)} control points in {reference}, "
+    comment = (f"fusiontrack calibrate: {int(result.inliers.sum())}/{len(pts)} control points in {reference}"
+               f"{f' (posed by {posed_by})' if posed_by not in ('world', 'the pipeline file') else ''}, "
                f"rms {result.rms_px:.2f} px")
     return _finish(pipeline, camera, "points", cam2world, previous, write, comment, pnp=result)
 

@@ -611,6 +611,27 @@ def first_scans(rec: Any, lasers: Sequence[str], time_source: str = "header") ->
     return first
 
 
+def recorded_laser_poses(rec: Any, first: Mapping[str, Any], world_frame: str = "world") -> dict[str, np.ndarray]:
+    """sensor -> laser2world ``(4, 4)`` of the scanners in ``first`` (:func:`first_scans`) from the recording's
+    ``/tf_static``: the pose of the scan's frame, or else of the sensor's name, in ``world_frame``; a scanner without
+    one has no entry. How :func:`detector_for_recording` poses a scanner its caller did not."""
+    from fusiontrack.geometry import TransformTree
+
+    tree = TransformTree()
+    if "/tf_static" in rec.topic_types():
+        for tf in rec.messages(["/tf_static"]):
+            try:
+                tree.add_record(tf)
+            except ConfigError as err:
+                log.warning("tf_static: %s", err)
+    poses = {}
+    for sensor, scan in first.items():
+        frame = next((f for f in (scan.frame_id, sensor) if f and tree.has_path(f, world_frame)), None)
+        if frame is not None:
+            poses[sensor] = tree.get(frame, world_frame)
+    return poses
+
+
 def detector_for_recording(rec: Any, lasers: list[str], *, time_source: str = "header", world_frame: str = "world",
                            background: str = "learn", detector_params: Mapping[str, Any] | None = None,
                            laser_poses: Mapping[str, Any] | None = None,
@@ -641,19 +662,13 @@ def detector_for_recording(rec: Any, lasers: list[str], *, time_source: str = "h
     -------
     detector, poses : the detector and each sensor's laser2world.
     """
-    from fusiontrack.geometry import TransformTree, make_transform
+    from fusiontrack.geometry import make_transform
 
     if background not in ("learn", "none"):
         raise ConfigError(f"background: expected 'learn' or 'none', got {background!r}")
     dparams = check_detector_params(detector_params)
-    tree = TransformTree()
-    if "/tf_static" in rec.topic_types():
-        for tf in rec.messages(["/tf_static"]):
-            try:
-                tree.add_record(tf)
-            except ConfigError as err:
-                log.warning("tf_static: %s", err)
     first = first_scans(rec, lasers, time_source)
+    recorded = recorded_laser_poses(rec, first, world_frame)
     given = dict(laser_poses or {})
     given.update({rec.sensor_of(t): given[t] for t in lasers if t in given})  # given by topic
     unused = sorted(k for k in laser_poses or {} if k not in first and k not in lasers)
@@ -662,7 +677,7 @@ def detector_for_recording(rec: Any, lasers: list[str], *, time_source: str = "h
                     ", ".join(unused), "is" if len(unused) == 1 else "are", ", ".join(lasers))
     poses: dict[str, np.ndarray] = {}
     unposed = []
-    for sensor, scan in first.items():
+    for sensor in first:
         pose = given.get(sensor)
         if pose is not None:
             try:
@@ -673,9 +688,8 @@ def detector_for_recording(rec: Any, lasers: list[str], *, time_source: str = "h
                 R = np.eye(3)
                 R[:2, :2] = R2
                 pose = make_transform(R, [t2[0], t2[1], 0.0])
-        for frame in (scan.frame_id, sensor):
-            if pose is None and frame and tree.has_path(frame, world_frame):
-                pose = tree.get(frame, world_frame)
+        if pose is None:
+            pose = recorded.get(sensor)
         if pose is None:
             unposed.append(sensor)
         poses[sensor] = np.eye(4) if pose is None else np.asarray(pose, np.float64)
