@@ -708,7 +708,7 @@ def track(
     with progress() as bar:
         task = bar.add_task(f"tracking ({tracker_kind})", total=1.0)
         if pipeline == "people":  # seed 001's fused pipeline (fusiontrack.fusion)
-            from .fusion import FusionParams, track_fused
+            from .fusion import FusionParams, camera_boxes, track_fused
 
             if tracker_kind != "pf":
                 raise ConfigError(f"--tracker: the people pipeline uses the pf tracker, got {tracker_kind!r}")
@@ -725,9 +725,16 @@ def track(
                 detector_params=cfg.laser or None, rng=seed, area_m=area_m, timings=timings,
                 adaptive_bias=camera_bias, progress=lambda f: bar.update(task, completed=f),
                 laser_poses=cfg.laser_poses(), sync_window_ns=cfg.sync.window_ns, camera_poses=cfg.camera_poses())
+            states = camera_boxes(states, fstats, fusion_params)  # each person's box in the camera (box_px)
             if not fstats.camera:
                 console.print("[yellow]no usable camera: people tracked with the lasers only[/yellow]")
-            elif fstats.bias is not None:
+            else:
+                console.print(f"{fstats.camera}: {fstats.frames_used} images read, {fstats.train_updates} "
+                              f"classifier updates from {fstats.train_frames} training frames, "
+                              f"{fstats.checks} identity checks ({fstats.exchanges} exchanged), {fstats.reids} of "
+                              f"{fstats.reid_claims} reborn tracks re-identified, {fstats.splits_by_appearance} of "
+                              f"{fstats.splits} splits by appearance")
+            if fstats.bias is not None:
                 from .calibration.bias_run import write_bias_history
 
                 output.mkdir(parents=True, exist_ok=True)

@@ -49,7 +49,7 @@ def people_comparison(recording: str | Path, output: str | Path, *, camera: str 
 
     from .calibration.bias_run import bias_from_recording
     from .eval import evaluate_floor, truth_at
-    from .fusion import track_fused
+    from .fusion import camera_boxes, track_fused
     from .tracking.tracker import track_recording
     from .vision.people import track_camera
     from .viz.report import Report
@@ -78,10 +78,11 @@ def people_comparison(recording: str | Path, output: str | Path, *, camera: str 
     tic = time.perf_counter()
     runs["fusion"], fevents, fstats = track_fused(recording, camera=corrected, adaptive_bias=False)  # learnt above
     times["fusion"] = time.perf_counter() - tic
+    runs["fusion"] = camera_boxes(runs["fusion"], fstats)  # the boxes where fusion read the camera
     from .viz.fused_overlay import render_fused_overlay
 
     # the laser points through the camera as corrected at each instant: off by the misalignment at first, on the
-    # people once the bias has been learnt
+    # people once the bias has been learnt (the boxes: where fusion read the camera, through the learnt bias)
     render_fused_overlay(recording, output / "fusion_overlay.mp4", runs["fusion"], camera=camera, bias_history=bias,
                          events=fevents)
 

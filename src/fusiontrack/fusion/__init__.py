@@ -22,10 +22,11 @@ from .tracker import (
     FusionStats,
     FusionTracker,
     Relabel,
+    camera_boxes,
     learn_camera_bias,
     relabel_states,
     track_fused,
 )
 
 __all__ = ["BiasLearning", "CameraBias", "FrameSource", "FusionParams", "FusionStats", "FusionTracker", "LazyFrames",
-           "Relabel", "learn_camera_bias", "relabel_states", "track_fused"]
+           "Relabel", "camera_boxes", "learn_camera_bias", "relabel_states", "track_fused"]

@@ -98,7 +98,7 @@ from ..calibration.bias_run import check_background
 from ..errors import ConfigError, RecordingError
 from ..geometry import PinholeCamera
 from ..tracking.tracker import LaserPeopleTracker, TrackerParams, run_tracker
-from ..types import Detection, Event, Image, Situation, TrackState
+from ..types import Detection, Event, Image, ObjectClass, Situation, TrackState
 from ..vision.appearance import AppearanceBank, AppearanceParams
 from ..vision.cvthreads import opencv_threads
 from ..vision.patches import box_visibility
@@ -107,7 +107,7 @@ if TYPE_CHECKING:
     from ..io.recording import Recording
 
 __all__ = ["BiasLearning", "CameraBias", "FrameSource", "FusionParams", "FusionStats", "FusionTracker", "Relabel",
-           "learn_camera_bias", "relabel_states", "track_fused"]
+           "camera_boxes", "learn_camera_bias", "relabel_states", "track_fused"]
 
 log = logging.getLogger(__name__)
 
@@ -647,6 +647,26 @@ class Relabel:
     to_ns: int
     a: int
     b: int
+
+
+def camera_boxes(states: Sequence[TrackState], stats: FusionStats,
+                 params: FusionParams | None = None) -> list[TrackState]:
+    """The fused tracks with each person's box in the camera they were fused through (``box_px``, ``camera``): B11's
+    box of the floor position, the one the fused tracker reads the camera in, through the camera as the bias pass
+    corrected it (``stats`` of the run). People whose box lies wholly outside the image or behind the camera, vehicles,
+    and all states of a run without a camera stay as they are. For writing and scoring the tracks in the image
+    (``fusiontrack eval --camera``); a projection, not a detection: ``sensors`` says when the camera was used."""
+    camera = stats.bias.corrected_camera if stats.bias is not None else stats.camera_model
+    out = list(states)
+    people = [k for k, s in enumerate(out) if s.cls == ObjectClass.PERSON and s.box_px is None]
+    if camera is None or not stats.camera or not people:
+        return out
+    p = params or FusionParams()
+    boxes = camera.person_box(np.array([out[k].position_m for k in people]), p.height_m, p.width_ratio)
+    seen = box_visibility(boxes, (camera.height, camera.width)) > 0
+    for k, box in zip(np.asarray(people)[seen], boxes[seen], strict=True):
+        out[k] = dataclasses.replace(out[k], box_px=box, camera=stats.camera)
+    return out
 
 
 def relabel_states(states: Sequence[TrackState], relabels: Sequence[Relabel]) -> list[TrackState]:

@@ -10,7 +10,10 @@ One output frame per image of the camera, the image itself underneath:
   small dots coloured by distance from the camera (near red, far blue) or by laser. With the right bias the
   leg returns sit on the people's legs; with a yaw error they sit beside them.
 * **tracks** — the states nearest in time (within half a scan period), each as its box (its ``box_px`` when
-  the state has one in this camera, else the image box of a person cylinder standing at ``position_m``,
+  the state has one in this camera, as the people pipeline's tracks have from :func:`~fusiontrack.fusion.
+  camera_boxes`: where the tracker read the camera, through the camera corrected by the bias learnt before it,
+  while the laser points show the bias as it was being learnt; else the image box of a person cylinder standing
+  at ``position_m``,
   :func:`person_boxes`, or for a track classed ``car`` or ``bicycle`` that of a car- or bicycle-sized cuboid
   along its velocity or, stopped, along its last heading, :func:`vehicle_boxes`; a vehicle track not classed
   yet, ``unknown``, is drawn as a person), its id in :func:`~fusiontrack.vision.overlay.id_colour` (drawn by
