@@ -4,6 +4,7 @@ pipeline must still find its camera (it used to track with the lasers only: "no 
 
 from __future__ import annotations
 
+import logging
 import math
 from pathlib import Path
 
@@ -103,7 +104,7 @@ def test_one_camera_published_raw_and_compressed_is_one_camera(tmp_path: Path) -
         assert rec.image_topic() == "/cam/image_raw/compressed"
 
 
-def test_image_topic_errors_name_the_option_and_the_choices(tmp_path: Path) -> None:
+def test_image_topic_errors_name_the_option_and_the_choices(tmp_path: Path, caplog) -> None:
     from fusiontrack.errors import ConfigError, TopicError
 
     path = _images(tmp_path / "r", {"/left/image_raw": "raw", "/left/image_raw/compressed": "png",
@@ -121,6 +122,11 @@ def test_image_topic_errors_name_the_option_and_the_choices(tmp_path: Path) -> N
             rec.image_topic(topic="/middle/image_raw", option="image_topic")
         with pytest.raises(TopicError, match="no image topic of camera '/middle/camera_info'"):
             rec.image_topic(camera="/middle/camera_info")
+    depth = _images(tmp_path / "d", {"/cam/image_raw": "raw", "/cam/depth/image_raw": "raw"})
+    with Recording(depth) as rec, caplog.at_level(logging.WARNING, logger="fusiontrack.io.recording"):
+        assert rec.image_topic(topic="/cam/depth/image_raw") == "/cam/depth/image_raw"  # the user's word, but said:
+    assert "'/cam/depth/image_raw' is named as a label or depth image topic, not colour images (colour image " \
+           "topics: /cam/image_raw)" in caplog.text
     empty = _images(tmp_path / "e", {"/cam/camera_info": "info"})
     with Recording(empty) as rec:
         assert rec.image_topic(required=False) is None

@@ -356,6 +356,10 @@ class Recording:
                 found = ", ".join(self.image_topics()) or "none"
                 what = "no such topic" if topic not in types else f"a {types[topic]} topic, not an image"
                 raise TopicError(f"{where}: {option} {topic!r}: {what}; image topics: {found}")
+            if not _colour_image(topic):  # the user's word, but its name says labels or depth: say so before a run
+                # that may read none of its images (a label or depth image is no colour image to track people in)
+                log.warning("%s: %s %r is named as a label or depth image topic, not colour images (colour image "
+                            "topics: %s)", where, option, topic, ", ".join(self.image_topics()) or "none")
             return topic
         found = self.image_topics(camera)
         if not found:
