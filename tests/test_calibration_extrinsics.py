@@ -114,6 +114,15 @@ def test_bad_control_points_are_clear_errors(scene):
     line = np.column_stack([np.arange(6.0), np.zeros(6), np.zeros(6)])
     with pytest.raises(CalibrationError, match="collinear"):
         solve_pnp(line, pix[:6], K)
+    # points in a plane through the camera's centre: their images lie on one line, and the pose is undetermined
+    # (OpenCV fitted the mis-typed 4 points of a user's file exactly, 223 m away)
+    cam = scene["camera"]
+    c, (a, b) = cam.position_m, cam.cam2world[:3, [0, 2]].T  # the plane of the image's x axis and the optical axis
+    in_plane = c + np.array([[1.0, 8.0], [-2.0, 10.0], [3.0, 12.0], [0.5, 9.0]]) @ np.array([a, b])
+    on_line = cam.project(in_plane)
+    assert np.all(np.isfinite(on_line))
+    with pytest.raises(CalibrationError, match="pixels of the 4 control points lie on one line"):
+        solve_pnp((in_plane - LASER2WORLD[:3, 3]) @ LASER2WORLD[:3, :3], on_line, K, DIST)
     bad = pix.copy()
     bad[0, 0] = np.nan
     with pytest.raises(CalibrationError, match="NaN"):
@@ -333,6 +342,14 @@ def test_calibrate_command_line(scene, tmp_path):
     bad = subprocess.run(cmd[:7], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2
     assert "exactly one of --points CSV or --adaptive RECORDING" in bad.stderr
+    clicked = scene["pixels"].copy()
+    clicked[5] += (40.0, -25.0)  # one mis-clicked corner: RANSAC rejects it, and the command says which
+    rows = "\n".join(",".join(f"{v:.6f}" for v in row) for row in np.hstack([scene["points"], clicked]))
+    csv.write_text("x_m,y_m,z_m,u_px,v_px\n" + rows + "\n", encoding="utf-8")
+    out = subprocess.run([*cmd, "--ransac", "--dry-run"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert f"PnP on {len(clicked) - 1} of {len(clicked)} points" in out.stdout
+    assert "point 6 rejected as an outlier: 47" in out.stdout  # its residual: the 47 px it was moved by
 
 
 @pytest.mark.parametrize("fx", [0.0, float("nan")])

@@ -1476,14 +1476,20 @@ def calibrate(
                                   "[,k3]] or --recording with its CameraInfo") from None
             raise
         fit = report.pnp
-        console.print(f"PnP on {len(fit.residuals_px)} points: reprojection "
+        n_in = int(fit.inliers.sum())
+        console.print(f"PnP on {n_in} of {len(fit.residuals_px)} points: reprojection (of those) "
                       f"rms {fit.rms_px:.2f} px, median {fit.median_px:.2f} px, max {fit.max_px:.2f} px")
+        for k in np.flatnonzero(~fit.inliers):  # the rejected ones, by their place in the file (1 = first point)
+            console.print(f"[yellow]point {k + 1} rejected as an outlier: {np.hypot(*fit.residuals_px[k]):.1f} px "
+                          "off its pixel[/yellow]")
     else:
         with console.status("learning the horizontal bias"):
             report = calibrate_from_recording(config, camera, adaptive, params=BiasParams(rho=rho),
                                               write=not dry_run)
         run = report.bias
-        console.print(f"horizontal bias {np.degrees(run.bias_rad):+.3f} deg after {len(run.history)} updates")
+        updates = int(np.count_nonzero(run.history.n_used))
+        console.print(f"horizontal bias {np.degrees(run.bias_rad):+.3f} deg after {updates} updates over "
+                      f"{len(run.history)} frames")
         if history is not None:
             history.parent.mkdir(parents=True, exist_ok=True)
             write_bias_history(history, run.history)

@@ -132,6 +132,18 @@ def _pairs(points_m: Any, pixels_px: Any) -> tuple[np.ndarray, np.ndarray]:
     return p, q
 
 
+def _check_not_on_a_line(q: np.ndarray, K: np.ndarray, d: np.ndarray) -> None:
+    """The control points' pixels, undistorted, on one line (within half a pixel rms): the points lie in a plane
+    through the camera's centre, which leaves the pose undetermined (OpenCV still returns one, fitting exactly,
+    metres off)."""
+    flat = cv2.undistortPoints(q.reshape(-1, 1, 2), K, d, P=K).reshape(-1, 2)
+    off = np.linalg.svd(flat - flat.mean(axis=0), compute_uv=False)[1] / math.sqrt(len(q))
+    if off < 0.5:
+        raise CalibrationError(f"solve_pnp: the pixels of the {len(q)} control points lie on one line (within "
+                               f"{off:.2g} px rms, distortion removed); the pose is undetermined: check the pixel "
+                               "columns, or add points off that line")
+
+
 def reprojection_residuals(ref2cam: Any, points_m: Any, pixels_px: Any, K: Any, dist: Any = None) -> np.ndarray:
     """``project(points) - pixels`` through ``K``, ``dist`` and the pose ``ref2cam`` (4, 4); ``(n, 2)`` px."""
     K, d = _intrinsics(K, dist)
@@ -221,6 +233,7 @@ def solve_pnp(points_m: Any, pixels_px: Any, K: Any, dist: Any = None, *, method
         raise ValueError(f"ransac_threshold_px: expected a positive threshold, got {ransac_threshold_px}")
     K, d = _intrinsics(K, dist)
     p, q = _pairs(points_m, pixels_px)
+    _check_not_on_a_line(q, K, d)
     n = len(p)
     obj, img = p.reshape(-1, 1, 3), q.reshape(-1, 1, 2)
     inliers = np.ones(n, dtype=bool)
