@@ -569,7 +569,7 @@ def track(
                                               "(constant-velocity baseline).")] = "pf",
     time_source: Annotated[str, typer.Option("--time", help="header (capture stamps) or log (recorder).")] = "header",
     video: Annotated[bool, typer.Option(help="Also write a bird's-eye video with the tracks (people-camera: the "
-                                        "overlay video).")] = True,
+                                        "overlay video; people: both, overlay.mp4 the camera's).")] = True,
     seed: Annotated[int | None, typer.Option(help="Random seed of the particle filters (default 0, or for traffic "
                                              "and wearable the pipeline file's own seed).")] = None,
     area: Annotated[str, typer.Option(help="Covered area, where people appear and leave: 'auto' (from the "
@@ -613,6 +613,11 @@ def track(
     blobs or from --detections; writes tracks.csv, tracks.jsonl, tracks_mot.txt (image boxes, MOTChallenge
     format) and overlay.mp4 (boxes, ids, foreground contours). Floor positions need a calibrated camera
     (a recording's CameraInfo and /tf_static); otherwise x, y are NaN.
+
+    With --pipeline people: the lasers and a camera fused (seed 001), the camera's horizontal bias learnt first
+    (seed 000): also bias.csv (the bias after each camera frame of that pass) and overlay.mp4 (laser points, boxes,
+    ids, situations and the live bias in the camera image); each state's sensors say when the camera was used, and
+    its box_px is the person's box in the camera.
     """
     from .io.tracks import write_jsonl, write_tracks_csv
 
