@@ -75,7 +75,9 @@ out (its columns and its target then say so), which halves the time of such a ru
 --skip-camera`` (about 20 minutes). ``--fusion KEY=VALUE`` sets an option of the fused tracker (a ``[fusion]`` key of a
 pipeline file, its value in TOML; dotted keys reach ``appearance``), e.g. ``--fusion contact_learn_s=false`` (seed
 001's learning, see :class:`~fusiontrack.fusion.FusionParams`: on seeds 0-2 it leaves groups seed 0's exchange
-unrepaired, IDF1 0.943 against 0.959, and takes 1.38x laser-only's time against 1.49x).
+unrepaired, IDF1 0.943 against 0.959, and takes 1.38x laser-only's time against 1.49x; measured while laser-only still
+read the whole recording once more before tracking, as the ratios up to 2026-11-30 were: it no longer does, which
+raised them by about 0.1).
 
     .venv/bin/python benchmarks/fusion.py [--seeds 0 1 2] [--crowd-seconds 30] [--groups-seconds 30] [--no-bias]
         [--repeat 1] [--skip-camera] [--rng 0] [--fusion KEY=VALUE ...]
