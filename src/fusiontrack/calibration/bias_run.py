@@ -112,19 +112,6 @@ class BiasRun:
         return float(self.history.bias_rad[-1]) if len(self.history) else 0.0
 
 
-def _transform_tree(rec: Recording) -> TransformTree:
-    tree = TransformTree()
-    topics = rec.topic_types()
-    for tf_topic in ("/tf_static", "/tf"):
-        if tf_topic in topics:
-            for tf in rec.messages([tf_topic]):
-                try:
-                    tree.add_record(tf)
-                except ConfigError as err:  # a transform that cannot be used (NaN): left out, as road.py does
-                    log.warning("%s %s: %s", rec.paths[0], tf_topic, err)
-    return tree
-
-
 def _camera_info(rec: Recording, camera: str) -> CameraInfo | None:
     infos = rec.camera_info_topics(camera)
     return next((m for m in rec.messages(infos[:1]) if isinstance(m, CameraInfo)), None) if infos else None
@@ -149,7 +136,7 @@ def _setup(rec: Recording, camera: str, lasers: Sequence[str] | None, world_fram
     if missing or not wanted:
         raise RecordingError(f"{rec.paths[0]}: laser(s) {missing or wanted} not found; lasers: {sorted(scan_topics)}")
     given = dict(laser2world or {})
-    tree = _transform_tree(rec) if any(name not in given for name in wanted) else TransformTree()
+    tree = rec.transform_tree() if any(name not in given for name in wanted) else TransformTree()
     poses = {}
     for name in wanted:
         if name in given:

@@ -760,19 +760,6 @@ def _log_residual(source: str, kind: str, name: str, res: SensorResidual, warn_m
 # ---- From a recording's believed calibration ---------------------------------------------------------------------
 
 
-def _transform_tree(rec: Recording) -> TransformTree:
-    tree = TransformTree()
-    topics = rec.topics()
-    for tf_topic in ("/tf_static", "/tf"):
-        if tf_topic in topics:
-            for tf in rec.messages([tf_topic]):
-                try:
-                    tree.add_record(tf)
-                except ConfigError as err:
-                    log.warning("%s %s: %s", rec.paths[0], tf_topic, err)
-    return tree
-
-
 def _first_messages(rec: Recording, msgtype: str) -> dict[str, str]:
     return {rec.sensor_of(t): t for t, i in rec.topics().items() if i.msgtype == msgtype}
 
@@ -809,7 +796,7 @@ def road_calibration_from_recording(rec: Recording | str | Path, *, world_frame:
             return road_calibration_from_recording(opened, world_frame=world_frame, cameras=cameras,
                                                    lasers=lasers, use_calibrated=use_calibrated)
     path = rec.paths[0]
-    tree = _transform_tree(rec)
+    tree = rec.transform_tree()
     infos, scans = _first_messages(rec, "sensor_msgs/msg/CameraInfo"), _first_messages(rec, "sensor_msgs/msg/LaserScan")
     strict_cams, strict_lasers = cameras is not None, lasers is not None
     cam_names = list(infos) if cameras is None else list(cameras)

@@ -416,6 +416,22 @@ class Recording:
     def duration_s(self) -> float:
         return max(self.end_ns - self.start_ns, 0) / 1e9
 
+    def transform_tree(self, topics: Sequence[str] = ("/tf_static", "/tf")) -> Any:
+        """A :class:`~fusiontrack.geometry.TransformTree` of every transform on ``topics`` (those the recording has);
+        a transform that cannot be used (NaN, a loop) is left out with a warning naming the recording and topic."""
+        from ..geometry import TransformTree
+
+        tree = TransformTree()
+        types = self.topic_types()
+        for tf_topic in topics:
+            if tf_topic in types:
+                for tf in self.messages([tf_topic]):
+                    try:
+                        tree.add_record(tf)
+                    except ConfigError as err:
+                        log.warning("%s %s: %s", self.paths[0], tf_topic, err)
+        return tree
+
     def topic_types(self) -> dict[str, str]:
         """Every topic with its message type, from the recordings' connections (nothing is read).
 

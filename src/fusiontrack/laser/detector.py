@@ -615,15 +615,7 @@ def recorded_laser_poses(rec: Any, first: Mapping[str, Any], world_frame: str = 
     """sensor -> laser2world ``(4, 4)`` of the scanners in ``first`` (:func:`first_scans`) from the recording's
     ``/tf_static``: the pose of the scan's frame, or else of the sensor's name, in ``world_frame``; a scanner without
     one has no entry. How :func:`detector_for_recording` poses a scanner its caller did not."""
-    from fusiontrack.geometry import TransformTree
-
-    tree = TransformTree()
-    if "/tf_static" in rec.topic_types():
-        for tf in rec.messages(["/tf_static"]):
-            try:
-                tree.add_record(tf)
-            except ConfigError as err:
-                log.warning("tf_static: %s", err)
+    tree = rec.transform_tree(["/tf_static"])
     poses = {}
     for sensor, scan in first.items():
         frame = next((f for f in (scan.frame_id, sensor) if f and tree.has_path(f, world_frame)), None)

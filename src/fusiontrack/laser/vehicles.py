@@ -1529,15 +1529,7 @@ def laser_poses_for_recording(rec: Any, lasers: Sequence[str], *, world_frame: s
     -------
     dict of sensor name -> (4, 4) float64
     """
-    from fusiontrack.geometry import TransformTree
-
-    tree = TransformTree()
-    if "/tf_static" in rec.topics():
-        for tf in rec.messages(["/tf_static"]):
-            try:
-                tree.add_record(tf)
-            except ConfigError as err:
-                log.warning("tf_static: %s", err)
+    tree = rec.transform_tree(["/tf_static"])
     first: dict[str, LaserScan] = {}
     for scan in rec.messages(list(lasers), time_source=time_source):
         if isinstance(scan, LaserScan):

@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError, RecordingError
-from ..geometry import PinholeCamera, TransformTree, invert_transform
+from ..geometry import PinholeCamera, invert_transform
 from ..io.tracks import MotBoxes, read_mot
 from ..tracking import kalman
 from ..tracking.association import hungarian
@@ -216,14 +216,7 @@ def camera_from_recording(rec: Any, image_sensor: str, frame_id: str, *, info_to
         return None
     if cam2world is not None:
         return PinholeCamera.from_camera_info(info, invert_transform(np.asarray(cam2world, np.float64)))
-    tree = TransformTree()
-    for tf_topic in ("/tf_static", "/tf"):
-        if tf_topic in topics:
-            for tf in rec.messages([tf_topic]):
-                try:
-                    tree.add_record(tf)
-                except ConfigError as err:
-                    log.warning("%s: %s", tf_topic, err)
+    tree = rec.transform_tree()
     for frame in (f"{frame_id}_calibrated", frame_id, info.frame_id, image_sensor):
         if frame and tree.has_path(frame, world_frame):
             return PinholeCamera.from_camera_info(info, tree.get(world_frame, frame))
