@@ -1071,10 +1071,10 @@ def _read_truth(path: Path, topic: str | None, time_source: str) -> tuple[list[A
             raise ConfigError(f"--topic {topic}: {path} is a CSV file, not a recording (it has no topics)")
         return read_ground_truth_csv(path), path.name
     with Recording(path) as rec:
-        info = rec.topics()
+        info = rec.topic_types()
         if topic is None:
-            candidates = [t for t, i in info.items() if i.msgtype in ("fusiontrack_msgs/msg/GroundTruth",
-                                                                    "leg_tracker/msg/Person")]
+            candidates = [t for t, msgtype in info.items() if msgtype in ("fusiontrack_msgs/msg/GroundTruth",
+                                                                          "leg_tracker/msg/Person")]
             topic = "/ground_truth" if "/ground_truth" in candidates else (candidates[0] if len(candidates) == 1
                                                                            else None)
             if topic is None and not candidates:
@@ -1085,7 +1085,7 @@ def _read_truth(path: Path, topic: str | None, time_source: str) -> tuple[list[A
                                   f"(found {', '.join(candidates)})")
         if topic not in info:
             raise ConfigError(f"--topic {topic}: {path} has no such topic; it has: {', '.join(sorted(info))}")
-        if info[topic].msgtype == "leg_tracker/msg/Person":
+        if info[topic] == "leg_tracker/msg/Person":
             # leg_tracker's annotators' rule: the Person messages that follow scan k belong to scan k
             from .io.recording import LASERSCAN
             from .io.sync import with_time
@@ -1361,7 +1361,7 @@ def _eval_image_boxes(tracks: Path, recording: Path, camera: str | None, time_so
     camera = camera.strip("/").removeprefix("ground_truth/")
     topic = f"/ground_truth/{camera}"
     with Recording(recording) as rec:
-        topics = rec.topics()
+        topics = rec.topic_types()
         if topic not in topics:
             if auto and states is not None:
                 return None
@@ -1530,7 +1530,7 @@ def calibrate_road_command(
     lens_models: dict[str, CameraInfo] = {}
     if lenses is not None:
         with Recording(lenses) as rec:
-            topics = {rec.sensor_of(t): t for t, i in rec.topics().items() if i.msgtype == "sensor_msgs/msg/CameraInfo"}
+            topics = {rec.sensor_of(t): t for t, m in rec.topic_types().items() if m == "sensor_msgs/msg/CameraInfo"}
             if not topics:
                 raise ConfigError(f"--lenses {lenses}: the recording has no CameraInfo topic")
             for name, topic in topics.items():

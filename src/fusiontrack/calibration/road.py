@@ -761,7 +761,7 @@ def _log_residual(source: str, kind: str, name: str, res: SensorResidual, warn_m
 
 
 def _first_messages(rec: Recording, msgtype: str) -> dict[str, str]:
-    return {rec.sensor_of(t): t for t, i in rec.topics().items() if i.msgtype == msgtype}
+    return {rec.sensor_of(t): t for t, m in rec.topic_types().items() if m == msgtype}
 
 
 def _pose_frame(tree: TransformTree, candidates: Iterable[str], world_frame: str) -> str | None:

@@ -385,7 +385,7 @@ def segment_frames(path: str | Path, *, clock_corrections_ns: Mapping[str, int] 
     corrections = {k: int(v) for k, v in (clock_corrections_ns or {}).items()}
     frames: list[SegmentFrame] = []
     with Recording(path) as rec:
-        lasers = [t for t, i in rec.topics().items() if i.msgtype == LASERSCAN]
+        lasers = [t for t, msgtype in rec.topic_types().items() if msgtype == LASERSCAN]
         if not lasers:
             raise EvaluationError(f"{path}: no sensor_msgs/LaserScan topic")
         gt = list(rec.messages(["/ground_truth"]))

@@ -271,8 +271,8 @@ def read_inputs(path: str | Path, *, phones: tuple[str, ...] | None = None,
     start_poses = dict(start_poses or {})
     rng = np.random.default_rng(rng)
     with Recording(path) as rec:
-        topics = rec.topics()
-        imu_topics = {rec.sensor_of(t): t for t, info in topics.items() if info.msgtype == IMU_MSGTYPE}
+        topics = rec.topic_types()
+        imu_topics = {rec.sensor_of(t): t for t, msgtype in topics.items() if msgtype == IMU_MSGTYPE}
         wanted = tuple(sorted(imu_topics)) if phones is None else tuple(phones)
         missing = [p for p in wanted if p not in imu_topics]
         if missing:

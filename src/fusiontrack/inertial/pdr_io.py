@@ -84,7 +84,7 @@ def load_imu(path: str | Path, *, sensor: str | None = None) -> ImuStream:
     from ..io.recording import open_recording
 
     with open_recording(path) as rec:
-        imu_topics = sorted(t for t, info in rec.topics().items() if info.msgtype == IMU_MSGTYPE)
+        imu_topics = sorted(t for t, msgtype in rec.topic_types().items() if msgtype == IMU_MSGTYPE)
         if sensor is not None:
             chosen = [t for t in imu_topics if t == sensor or rec.sensor_of(t) == sensor]
             if not chosen:

@@ -106,7 +106,7 @@ def _frames(path: str | Path, *, background: str = "learn", time_source: str = "
     from fusiontrack.laser.detector import detector_for_recording
 
     with Recording(path) as rec:
-        lasers = [t for t, i in rec.topics().items() if i.msgtype == LASERSCAN]
+        lasers = [t for t, msgtype in rec.topic_types().items() if msgtype == LASERSCAN]
         detector, _ = detector_for_recording(rec, lasers, time_source=time_source, background=background,
                                              detector_params=detector_params)
 

@@ -1554,9 +1554,9 @@ def laser_poses_for_recording(rec: Any, lasers: Sequence[str], *, world_frame: s
 
 
 def _laser_topics(rec: Any, lasers: Sequence[str] | None) -> list[str]:
-    topics = rec.topics()
+    topics = rec.topic_types()
     if lasers is None:
-        found = [t for t, info in topics.items() if info.msgtype == "sensor_msgs/msg/LaserScan"]
+        found = [t for t, msgtype in topics.items() if msgtype == "sensor_msgs/msg/LaserScan"]
         if not found:
             raise ConfigError(f"{rec.paths[0]}: no LaserScan topic (topics: {sorted(topics)})")
         return found

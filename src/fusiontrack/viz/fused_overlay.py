@@ -381,7 +381,7 @@ def _setup(rec: Recording, camera: str, image_topic: str | None, world_frame: st
     """The camera's image topic and model, and the lasers' scan topics and poses."""
     from ..vision.people import camera_from_recording
 
-    topics = rec.topics()
+    topics = rec.topic_types()
     where = ", ".join(str(p) for p in rec.paths)
     image = rec.image_topic(camera=camera, topic=image_topic, option="image_topic")
     if camera_model is None:
@@ -390,7 +390,7 @@ def _setup(rec: Recording, camera: str, image_topic: str | None, world_frame: st
             raise RecordingError(f"{where}: camera {camera!r} needs a CameraInfo and a pose in /tf_static "
                                  f"({camera}_calibrated or {camera} relative to {world_frame!r}); or pass "
                                  "camera_model")
-    scan_topics = {rec.sensor_of(t): t for t, i in topics.items() if i.msgtype == LASERSCAN}
+    scan_topics = {rec.sensor_of(t): t for t, msgtype in topics.items() if msgtype == LASERSCAN}
     wanted = sorted(scan_topics) if lasers is None else [str(name) for name in lasers]
     missing = [name for name in wanted if name not in scan_topics]
     if missing:
