@@ -1090,7 +1090,7 @@ def _read_truth(path: Path, topic: str | None, time_source: str) -> tuple[list[A
             from .io.recording import LASERSCAN
             from .io.sync import with_time
 
-            lasers = [t for t, i in info.items() if i.msgtype == LASERSCAN]
+            lasers = [t for t, msgtype in info.items() if msgtype == LASERSCAN]
             frames, scan_t = [], None
             for m in rec.messages([*lasers, topic], time_source="log"):
                 if isinstance(m, GroundTruth):
@@ -1105,7 +1105,7 @@ def _read_truth(path: Path, topic: str | None, time_source: str) -> tuple[list[A
         else:
             frames = [m for m in rec.messages([topic], time_source=time_source) if isinstance(m, GroundTruth)]
             if not frames:
-                raise ConfigError(f"--topic {topic}: {info[topic].msgtype} is not ground truth; eval reads "
+                raise ConfigError(f"--topic {topic}: {info[topic]} is not ground truth; eval reads "
                                   f"fusiontrack_msgs/msg/GroundTruth or leg_tracker/msg/Person topics, or a CSV "
                                   f"file (t or t_ns, id, x, y)")
             if all(not len(f.ids) for f in frames):
@@ -1115,7 +1115,7 @@ def _read_truth(path: Path, topic: str | None, time_source: str) -> tuple[list[A
                                   f"instant; eval scores tracks against "
                                   f"{'/ground_truth' if '/ground_truth' in info else 'a topic of people positions'}")
             if all((np.asarray(f.ids) < 0).all() for f in frames if len(f.ids)):
-                raise ConfigError(f"--topic {topic}: its {info[topic].msgtype} positions carry no identities, "
+                raise ConfigError(f"--topic {topic}: its {info[topic]} positions carry no identities, "
                                   f"which scoring tracks needs; give the truth as a CSV file (t or t_ns, id, x, y)")
     return frames, topic
 
