@@ -114,15 +114,19 @@ def test_bad_control_points_are_clear_errors(scene):
     line = np.column_stack([np.arange(6.0), np.zeros(6), np.zeros(6)])
     with pytest.raises(CalibrationError, match="collinear"):
         solve_pnp(line, pix[:6], K)
-    # points in a plane through the camera's centre: their images lie on one line, and the pose is undetermined
-    # (OpenCV fitted the mis-typed 4 points of a user's file exactly, 223 m away)
+    # pixels on one line are the images of points in one plane through the camera's centre: the corners of boxes
+    # (not in one plane) cannot look so, whatever the pose (OpenCV fitted such a mis-typed file exactly, 223 m away)
     cam = scene["camera"]
-    c, (a, b) = cam.position_m, cam.cam2world[:3, [0, 2]].T  # the plane of the image's x axis and the optical axis
-    in_plane = c + np.array([[1.0, 8.0], [-2.0, 10.0], [3.0, 12.0], [0.5, 9.0]]) @ np.array([a, b])
-    on_line = cam.project(in_plane)
-    assert np.all(np.isfinite(on_line))
-    with pytest.raises(CalibrationError, match="pixels of the 4 control points lie on one line"):
-        solve_pnp((in_plane - LASER2WORLD[:3, 3]) @ LASER2WORLD[:3, :3], on_line, K, DIST)
+    typed = np.column_stack([pix[:8, 0], np.full(8, 240.0)])  # the v column typed as the same value
+    with pytest.raises(CalibrationError, match=r"pixels of the 8 control points lie on one line .* not in one plane"):
+        solve_pnp(pts[:8], typed, K, DIST)
+    # points that are in one plane through the camera's centre (markers at the camera's height, here in the plane of
+    # the image's x axis and the optical axis) do look so: they are solved, and the pose is the camera's
+    c, (a, b) = cam.position_m, cam.cam2world[:3, [0, 2]].T
+    in_plane = c + np.array([[1.0, 8.0], [-2.0, 10.0], [3.0, 12.0], [0.5, 9.0], [-1.0, 14.0]]) @ np.array([a, b])
+    in_laser = (in_plane - LASER2WORLD[:3, 3]) @ LASER2WORLD[:3, :3]
+    fit = solve_pnp(in_laser, cam.project(in_plane), K, DIST)
+    np.testing.assert_allclose(fit.cam2world(LASER2WORLD)[:3, 3], c, atol=1e-3)
     bad = pix.copy()
     bad[0, 0] = np.nan
     with pytest.raises(CalibrationError, match="NaN"):

@@ -1427,7 +1427,8 @@ def calibrate(
     reference: Annotated[str | None, typer.Option(help="With --points: frame of the control points, world (the "
                                                   "default) or a sensor of the pipeline (e.g. a laser).")] = None,
     recording: Annotated[Path | None, typer.Option(help="With --points: a recording whose CameraInfo gives the "
-                                                   "intrinsics.")] = None,
+                                                   "intrinsics (unless --intrinsics does), and whose /tf_static "
+                                                   "poses a --reference laser the pipeline file does not.")] = None,
     intrinsics: Annotated[str | None, typer.Option(help="With --points: fx,fy,cx,cy[,k1,k2,p1,p2[,k3]].")] = None,
     ransac: Annotated[bool, typer.Option(help="With --points: RANSAC against mis-clicked points.")] = False,
     adaptive: Annotated[Path | None, typer.Option(help="Instead of points: learn the camera's horizontal bias "
@@ -1454,8 +1455,6 @@ def calibrate(
     if unused := [o for o in other if given[o]]:
         raise ConfigError(f"{', '.join(unused)}: only with {'--adaptive' if points is not None else '--points'} "
                           f"(this run calibrates {'from --points' if points is not None else 'by --adaptive'})")
-    if intrinsics is not None and recording is not None:
-        raise ConfigError("--intrinsics and --recording both give the camera's intrinsics: give one")
     rho = 0.1 if rho is None else rho
     reference = "world" if reference is None else reference
     if not 0.0 < rho <= 1.0:  # (NaN too)

@@ -379,8 +379,9 @@ def open_bias_inputs(path: str | Path, camera: str = "camera_0", lasers: Sequenc
     wide shrunk by :func:`vision_factor` first (e.g. :data:`VISION_WIDTH_PX`; boxes and centroids are given in
     full-image pixels either way). ``image_topic`` is the camera's image topic (``sensor_msgs/Image`` or
     ``CompressedImage``; default: the camera's first one that is not a label or depth image, raw images
-    preferred). ``recording``: an open :class:`~fusiontrack.io.Recording` of ``path`` to read through (setup,
-    priming and iteration; the caller closes it), instead of opening ``path`` for each.
+    preferred). ``recording``: an open :class:`~fusiontrack.io.Recording` of ``path`` (or of several files, ``path``
+    one of them) to read through (setup, priming and iteration; the caller closes it), instead of opening ``path``
+    for each.
 
     Raises
     ------

@@ -160,7 +160,11 @@ def _reference2world(cfg: PipelineConfig, reference: str, source: str,
             if sensor.topic not in rec.topic_types():
                 raise ConfigError(f"{source}: reference {reference!r} has no pose in the pipeline file, and its topic "
                                   f"{sensor.topic} is not in {recording}")
-            poses = recorded_laser_poses(rec, first_scans(rec, [sensor.topic]))
+            first = first_scans(rec, [sensor.topic])
+            if not first:  # (its frame id, which /tf_static poses, is in its scans)
+                raise ConfigError(f"{source}: reference {reference!r} has no pose in the pipeline file, and its topic "
+                                  f"{sensor.topic} holds no scan in {recording} to find its frame in /tf_static")
+            poses = recorded_laser_poses(rec, first)
         if poses:
             return next(iter(poses.values())), f"{recording}'s /tf_static"
         raise ConfigError(f"{source}: reference {reference!r} has no pose in the pipeline file, nor in {recording}'s "
@@ -201,7 +205,8 @@ def calibrate_from_points(pipeline: str | Path, camera: str, points: str | Path,
     intrinsics : CameraInfo or (K (3, 3), dist), optional
         The camera's intrinsics; else read from ``recording``.
     recording : str or Path, optional
-        A recording with the camera's ``CameraInfo`` (the sensor's ``info_topic`` if set).
+        A recording with the camera's ``CameraInfo`` (the sensor's ``info_topic`` if set), read when ``intrinsics``
+        is not given; and whose ``/tf_static`` poses a ``reference`` laser the pipeline file gives no pose.
     ransac, ransac_threshold_px : bool, float
         Reject mis-clicked points (X6: 5 px).
     write : bool

@@ -132,16 +132,19 @@ def _pairs(points_m: Any, pixels_px: Any) -> tuple[np.ndarray, np.ndarray]:
     return p, q
 
 
-def _check_not_on_a_line(q: np.ndarray, K: np.ndarray, d: np.ndarray) -> None:
-    """The control points' pixels, undistorted, on one line (within half a pixel rms): the points lie in a plane
-    through the camera's centre, which leaves the pose undetermined (OpenCV still returns one, fitting exactly,
-    metres off)."""
+def _check_not_on_a_line(p: np.ndarray, q: np.ndarray, K: np.ndarray, d: np.ndarray) -> None:
+    """Pixels that, undistorted, lie on one line (within half a pixel rms) are images of points in one plane through
+    the camera's centre. Points that are not in one plane (more than 1 cm rms off their best plane) cannot look so:
+    the pixels do not belong to those points (a mis-typed column), though OpenCV would still fit a pose to them
+    exactly, metres off. Points in one plane may (the camera at the height of markers on a wall): they are solved."""
     flat = cv2.undistortPoints(q.reshape(-1, 1, 2), K, d, P=K).reshape(-1, 2)
-    off = np.linalg.svd(flat - flat.mean(axis=0), compute_uv=False)[1] / math.sqrt(len(q))
-    if off < 0.5:
+    off_line = np.linalg.svd(flat - flat.mean(axis=0), compute_uv=False)[1] / math.sqrt(len(q))
+    off_plane = np.linalg.svd(p - p.mean(axis=0), compute_uv=False)[2] / math.sqrt(len(p))
+    if off_line < 0.5 and off_plane > 0.01:
         raise CalibrationError(f"solve_pnp: the pixels of the {len(q)} control points lie on one line (within "
-                               f"{off:.2g} px rms, distortion removed); the pose is undetermined: check the pixel "
-                               "columns, or add points off that line")
+                               f"{off_line:.2g} px rms, distortion removed), but the points are not in one plane "
+                               f"({off_plane:.2g} m rms off it): no camera sees them so; check the pixel columns "
+                               "and that each point's pixel is its own")
 
 
 def reprojection_residuals(ref2cam: Any, points_m: Any, pixels_px: Any, K: Any, dist: Any = None) -> np.ndarray:
@@ -233,7 +236,7 @@ def solve_pnp(points_m: Any, pixels_px: Any, K: Any, dist: Any = None, *, method
         raise ValueError(f"ransac_threshold_px: expected a positive threshold, got {ransac_threshold_px}")
     K, d = _intrinsics(K, dist)
     p, q = _pairs(points_m, pixels_px)
-    _check_not_on_a_line(q, K, d)
+    _check_not_on_a_line(p, q, K, d)
     n = len(p)
     obj, img = p.reshape(-1, 1, 3), q.reshape(-1, 1, 2)
     inliers = np.ones(n, dtype=bool)

@@ -1615,8 +1615,9 @@ def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCame
     max_prime_scans : int, optional
 
     recording : Recording, optional
-        An open :class:`~fusiontrack.io.Recording` of ``path`` to read through (the caller closes it) instead of
-        opening ``path`` again for the setup, the priming and the pass (:func:`track_fused` passes its own).
+        An open :class:`~fusiontrack.io.Recording` of ``path`` (or of several files, ``path`` then the first of them,
+        for the messages) to read through (the caller closes it) instead of opening ``path`` again for the setup,
+        the priming and the pass (:func:`track_fused` passes its own, of all its files).
     Returns
     -------
     CameraBias
@@ -1695,7 +1696,8 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
     Parameters
     ----------
     path : recording path(s)
-        With several files, the bias is learnt from the first one.
+        With several files (e.g. the lasers in one, the camera in another), read as one recording, the bias pass
+        too.
     params : FusionParams, optional
     tracker_params : TrackerParams or mapping, optional
     camera_topic : str, optional
@@ -1800,8 +1802,8 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
         bias = None
         if camera is not None and learning is not None and first_path is not None:
             # the bias pass reads through rec (all the files, opened once), before the tracking pass
-            bias = _learn_bias(first_path, cam_sensor, image_topic, camera, poses, learning, corrections,
-                               world_frame, background, rec)
+            bias = _learn_bias(path, cam_sensor, image_topic, camera, poses, learning, corrections, world_frame,
+                               background, rec)
             if bias is not None:
                 camera = bias.corrected_camera
                 if timings is not None:
@@ -1841,13 +1843,15 @@ def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams
     return relabel_states(states, trk.relabels), events, trk.stats
 
 
-def _learn_bias(path: str | Path, cam_sensor: str, image_topic: str | None, camera: PinholeCamera,
-                poses: Mapping[str, np.ndarray], learning: BiasLearning, corrections: Mapping[str, int],
-                world_frame: str, background: str = "prime",
+def _learn_bias(path: str | Path | Sequence[str | Path], cam_sensor: str, image_topic: str | None,
+                camera: PinholeCamera, poses: Mapping[str, np.ndarray], learning: BiasLearning,
+                corrections: Mapping[str, int], world_frame: str, background: str = "prime",
                 recording: Recording | None = None) -> CameraBias | None:
-    """:func:`learn_camera_bias` for :func:`track_fused`: None (with a warning) when it cannot be learnt."""
+    """:func:`learn_camera_bias` for :func:`track_fused` (``path``: its recording's file or files, read through
+    ``recording``): None (with a warning) when it cannot be learnt."""
+    first = path if isinstance(path, str | Path) else next(iter(path))
     try:
-        bias = learn_camera_bias(path, cam_sensor, camera=camera, lasers=poses, learning=learning,
+        bias = learn_camera_bias(first, cam_sensor, camera=camera, lasers=poses, learning=learning,
                                  clock_corrections_ns=corrections, world_frame=world_frame,
                                  image_topic=image_topic, background=background, recording=recording)
     except (RecordingError, ValueError) as err:  # no usable calibration or images: fuse as calibrated

@@ -94,6 +94,9 @@ _DEPTH_NAMESPACE = re.compile(r"(aligned_)?depth(_\w+)?")
 _TRANSPORTS = ("compressed", "theora", "zstd", "ffmpeg", "h264", "jpeg", "png")
 
 
+_WARNED_NOT_COLOUR: set[tuple[tuple[str, ...], str]] = set()  # (recording, topic) warned of by image_topic
+
+
 def _colour_image(topic: str) -> bool:
     """An image topic's name is not that of a label or depth image: the simulator's ``/<camera>/labels`` and
     ``/<camera>/depth``, an image named for depth (``.../image_depth``, ``.../compressedDepth``), or an image in a
@@ -356,8 +359,11 @@ class Recording:
                 found = ", ".join(self.image_topics()) or "none"
                 what = "no such topic" if topic not in types else f"a {types[topic]} topic, not an image"
                 raise TopicError(f"{where}: {option} {topic!r}: {what}; image topics: {found}")
-            if not _colour_image(topic):  # the user's word, but its name says labels or depth: say so before a run
-                # that may read none of its images (a label or depth image is no colour image to track people in)
+            warned = (tuple(str(q) for q in self.paths), topic)
+            if not _colour_image(topic) and warned not in _WARNED_NOT_COLOUR:  # the user's word, but its name says
+                # labels or depth: said (once: a run's set-up, bias pass and overlay each ask) before a run that may
+                # read none of its images (a label or depth image is no colour image to track people in)
+                _WARNED_NOT_COLOUR.add(warned)
                 log.warning("%s: %s %r is named as a label or depth image topic, not colour images (colour image "
                             "topics: %s)", where, option, topic, ", ".join(self.image_topics()) or "none")
             return topic

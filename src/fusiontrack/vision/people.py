@@ -1050,8 +1050,9 @@ def _run(frames: _Frames, det: MotBoxes | None, params: CameraTrackerParams | No
                 seconds["overlay"] += time.perf_counter() - t0
                 yield img
 
+        fps = min(max(frames.fps, 1.0), 60.0)  # (the image topic's rate: a pass over the recording, not timed)
         t0 = time.perf_counter()
-        write_video(overlay, drawn(), fps=min(max(frames.fps, 1.0), 60.0))
+        write_video(overlay, drawn(), fps=fps)
         # write_video's own time (encoding) minus what the frames cost to make
         seconds["overlay"] = time.perf_counter() - t0 - sum(v for k, v in seconds.items() if k != "overlay")
     else:
