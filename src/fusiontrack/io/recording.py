@@ -22,7 +22,7 @@ from collections import Counter, deque
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from rosbags.highlevel import AnyReader
@@ -42,6 +42,9 @@ from .ros import (
     stamp_to_ns,
 )
 from .sync import with_time
+
+if TYPE_CHECKING:
+    from ..geometry import TransformTree
 
 log = logging.getLogger(__name__)
 
@@ -422,7 +425,7 @@ class Recording:
     def duration_s(self) -> float:
         return max(self.end_ns - self.start_ns, 0) / 1e9
 
-    def transform_tree(self, topics: Sequence[str] = ("/tf_static", "/tf")) -> Any:
+    def transform_tree(self, topics: Sequence[str] = ("/tf_static", "/tf")) -> TransformTree:
         """A :class:`~fusiontrack.geometry.TransformTree` of every transform on ``topics`` (those the recording has);
         a transform that cannot be used (NaN, a loop) is left out with a warning naming the recording and topic."""
         from ..geometry import TransformTree
