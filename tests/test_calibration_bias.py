@@ -292,6 +292,39 @@ def test_stop_rule_on_noisy_boxes_stops_within_the_tolerance_of_the_true_bias():
     assert bias_settled(wander, np.full(20, noisy.mean()), 20, tol)  # the same bias, targets in agreement
 
 
+def test_warm_start_bias_is_the_mean_of_its_first_targets_then_a10():
+    # BiasParams.warm_start: the n-th update at max(rho, 1/n). Noise-free, the first update lands on the true
+    # bias; with jitter, the bias after n <= 1/rho updates is the mean of their targets b + ē, and later
+    # updates are A10's at rho.
+    bias = run(estimator(0.1, warm_start=True), [person_at(200, 5.0)], 5)
+    np.testing.assert_allclose(bias, 3.0, atol=1e-4)
+    rng = np.random.default_rng(3)
+    bias, target = _biases_and_targets(estimator(0.1, warm_start=True), [person_at(200, 5.0)], 30,
+                                       FX * math.tan(math.radians(0.3)), rng)
+    assert np.isfinite(target).all()
+    np.testing.assert_allclose(bias[:10], np.cumsum(target[:10]) / np.arange(1, 11), atol=1e-12)
+    np.testing.assert_allclose(bias[10:], bias[9:-1] + 0.1 * (target[10:] - bias[9:-1]), atol=1e-12)
+
+
+def test_warm_start_after_20_updates_is_nearer_the_true_bias_than_a10_after_40():
+    # 0.3 degrees of blob jitter: A10 alone after 40 updates still lags 3 (0.9)^40 = 0.044 degree behind; the
+    # warm start's mean of 20 targets has no lag, only its noise (0.3 / sqrt(20) = 0.067 degree sigma, 0.054
+    # mean absolute). Over 20 runs the warm start at 20 updates is the nearer, and unbiased.
+    sigma_px = FX * math.tan(math.radians(0.3))
+    warm, fixed = [], []
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        warm.append(run(estimator(0.1, warm_start=True), [person_at(200, 5.0)], 20, box_noise_px=sigma_px,
+                        rng=rng)[-1])
+        rng = np.random.default_rng(seed)
+        fixed.append(run(estimator(0.1), [person_at(200, 5.0)], 40, box_noise_px=sigma_px, rng=rng)[-1])
+    warm_err, fixed_err = np.abs(np.array(warm) - 3.0), np.abs(np.array(fixed) - 3.0)
+    assert warm_err.mean() < fixed_err.mean()
+    assert warm_err.mean() <= 0.085  # the paper's average error after convergence
+    assert abs(np.mean(warm) - 3.0) <= 3 * 0.067 / math.sqrt(20)  # no lag: its mean within 3 standard errors
+    assert np.mean(fixed) < 3.0 - 0.02  # A10 alone: still behind
+
+
 @pytest.mark.parametrize(("kw", "name"), [({"window": 0}, "window"), ({"tol_rad": 0.0}, "tol_rad"),
                                           ({"target_rad": [0.0]}, "target_rad")])
 def test_stop_rule_bad_arguments_name_the_argument(kw, name):
@@ -335,7 +368,7 @@ def test_history_and_corrected_camera():
                                           ({"margin_rad": -0.1}, "margin_rad"), ({"n_min": 0}, "n_min"),
                                           ({"range_gate_m": -1.0}, "range_gate_m"), ({"clarity": 0.5}, "clarity"),
                                           ({"centre": "middle"}, "centre"), ({"gate_sigmas": -1.0}, "gate_sigmas"),
-                                          ({"bg_beta": 2.0}, "bg_beta")])
+                                          ({"bg_beta": 2.0}, "bg_beta"), ({"warm_start": "yes"}, "warm_start")])
 def test_bad_parameters_name_the_parameter(kw, name):
     with pytest.raises(ValueError, match=rf"BiasParams\.{name}"):
         BiasParams(**kw)
