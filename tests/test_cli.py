@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import subprocess
 import sys
@@ -9,6 +10,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 
 from fusiontrack.io.recording import Recording
 from fusiontrack.types import LaserScan, records_equal
@@ -256,6 +258,20 @@ def test_track_and_eval_a_simulated_crossing(tmp_path):
     run("track", str(rec), "-o", str(out))
     for name in ("tracks.csv", "tracks.jsonl", "tracks.mp4"):
         assert (out / name).stat().st_size > 0
+    # info on the output (the folder, or either file) describes the tracks, not "a recording that cannot be opened"
+    with (out / "tracks.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    times = [float(r["t"]) for r in rows]
+    for target in (out, out / "tracks.csv", out / "tracks.jsonl"):
+        d = json.loads(run("info", str(target), "--json").stdout)
+        assert d["kind"] == "tracks"
+        assert d["states"] == len(rows)
+        assert d["tracks"] == len({r["id"] for r in rows})
+        assert d["duration_s"] == pytest.approx(max(times) - min(times), abs=1e-3)
+        assert sum(d["situations"].values()) == len(rows)
+        assert d["confirmed_by"]["laser"] == sum("laser" in r["sensors"] for r in rows)
+    assert "events" in d  # (the JSONL has the events: three people come in)
+    assert d["events"].get("appear", 0) + d["events"].get("born", 0) >= 3
     metrics_json = tmp_path / "m.json"
     printed = run("eval", str(out), str(rec), "-o", str(metrics_json)).stdout
     assert "MOTA" in printed

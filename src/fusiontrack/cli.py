@@ -7,6 +7,7 @@ Errors a user can cause end as one line on stderr and a non-zero exit code, neve
 from __future__ import annotations
 
 import collections
+import csv
 import json
 import logging
 import math
@@ -139,8 +140,66 @@ def describe_imu_csv(path: Path) -> dict[str, Any]:
     return out
 
 
+def _is_tracks(path: Path) -> bool:
+    """Whether ``path`` is a tracker's output rather than a recording: a folder of `fusiontrack track` (no
+    metadata.yaml, a tracks.jsonl or tracks.csv), a .jsonl file, or a CSV whose header names id, x and y (tracks or
+    positions of people, where an IMU CSV has ax, ay, az)."""
+    if path.is_dir():
+        return not (path / "metadata.yaml").exists() and any((path / n).is_file() for n in ("tracks.jsonl",
+                                                                                              "tracks.csv"))
+    suffix = path.suffix.lower()
+    if suffix == ".jsonl":
+        return True
+    if suffix != ".csv" or not path.is_file():
+        return False
+    try:
+        with path.open(newline="", encoding="utf-8") as f:
+            header = next(csv.reader(f), [])
+    except (OSError, UnicodeDecodeError):
+        return False  # (read as an IMU CSV, which says what is wrong)
+    return {"id", "x", "y"} <= {h.strip().lower() for h in header}
+
+
+def describe_tracks(path: Path) -> dict[str, Any]:
+    """Facts about a tracks file (``fusiontrack track``'s tracks.jsonl or tracks.csv, or its folder): states, tracks,
+    time span, classes, situations, the sensors that confirmed the states, image boxes and events."""
+    Counter = collections.Counter
+    file = _tracks_file(path)
+    states, events = _read_tracks(path)
+    t = [s.t_ns for s in states]
+    out: dict[str, Any] = {
+        "kind": "tracks", "paths": [str(file)], "states": len(states), "tracks": len({s.track_id for s in states}),
+        "start_ns": min(t) if t else None, "end_ns": max(t) if t else None,
+        "duration_s": (max(t) - min(t)) / 1e9 if t else 0.0,
+        "classes": dict(Counter(str(s.cls) for s in states).most_common()),
+        "situations": dict(Counter(str(s.situation) for s in states).most_common()),
+        "confirmed_by": dict(Counter(x for s in states for x in s.sensors).most_common()),
+        "image_boxes": dict(Counter(s.camera or "camera" for s in states if s.box_px is not None).most_common()),
+    }
+    if file.suffix != ".csv":
+        out["events"] = dict(Counter(e.kind for e in events).most_common())
+    return out
+
+
 def _print_description(d: dict[str, Any]) -> None:
-    if d["kind"] == "recording":
+    if d["kind"] == "tracks":
+        n = d["states"]
+        console.print(f"[bold]{d['paths'][0]}[/]: tracks, {d['tracks']} track{'s' if d['tracks'] != 1 else ''}, "
+                      f"{n} state{'s' if n != 1 else ''}"
+                      + (f" over {d['duration_s']:.2f} s, from {_fmt_time(d['start_ns'])} to {_fmt_time(d['end_ns'])}"
+                         if n else ""))
+
+        def share(counts: dict[str, int]) -> str:
+            return ", ".join(f"{k} {v} ({100 * v / n:.0f} %)" for k, v in counts.items()) if counts else "none"
+
+        console.print(f"  states by class: {share(d['classes'])}")
+        console.print(f"  by situation: {share(d['situations'])}")
+        console.print(f"  confirmed by: {share(d['confirmed_by'])}")
+        if d["image_boxes"]:
+            console.print(f"  with an image box: {share(d['image_boxes'])}")
+        if "events" in d:
+            console.print(f"  events: {_counts(d['events'])}")
+    elif d["kind"] == "recording":
         console.print(f"[bold]{', '.join(d['paths'])}[/]")
         console.print(f"  duration {d['duration_s']:.2f} s, from {_fmt_time(d['start_ns'])} to "
                       f"{_fmt_time(d['end_ns'])}, {d['messages']} messages")
@@ -163,25 +222,29 @@ def _print_description(d: dict[str, Any]) -> None:
 
 
 def _describe(paths: list[Path], merge: bool) -> list[dict[str, Any]]:
-    videos = [p for p in paths if p.suffix.lower() in VIDEO_SUFFIXES]
-    csvs = [p for p in paths if p.suffix.lower() == ".csv"]
-    bags = [p for p in paths if p not in videos and p not in csvs]
+    tracks = [p for p in paths if _is_tracks(p)]
+    videos = [p for p in paths if p.suffix.lower() in VIDEO_SUFFIXES and p not in tracks]
+    csvs = [p for p in paths if p.suffix.lower() == ".csv" and p not in tracks]
+    bags = [p for p in paths if p not in videos and p not in csvs and p not in tracks]
     out = ([describe_recording(bags)] if merge else [describe_recording([p]) for p in bags]) if bags else []
     out += [describe_video(p) for p in videos]
     out += [describe_imu_csv(p) for p in csvs]
+    out += [describe_tracks(p) for p in tracks]
     return out
 
 
 @app.command()
 def info(
     recordings: Annotated[list[Path], typer.Argument(help="Bags (ROS 1 .bag, ROS 2 folder, .mcap, .db3), "
-                                                          "video files or IMU CSV files.")],
+                                                          "video files, IMU CSV files, or tracks (tracks.jsonl, "
+                                                          "tracks.csv or the folder of `fusiontrack track`).")],
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
     merge: Annotated[bool, typer.Option(
         "--merge", help="Describe several bags as one recording (streams merged by time), as the tracker reads them."
     )] = False,
 ) -> None:
-    """Show what recordings hold: topics, message types, counts, rates and duration."""
+    """Show what recordings hold: topics, message types, counts, rates and duration (for tracks: tracks, states,
+    time span, classes, situations, confirming sensors, image boxes and events)."""
     descriptions = _describe(recordings, merge)
     if as_json:
         console.print_json(json.dumps(descriptions if len(descriptions) > 1 else descriptions[0]))
