@@ -306,6 +306,29 @@ def test_warm_start_bias_is_the_mean_of_its_first_targets_then_a10():
     np.testing.assert_allclose(bias[10:], bias[9:-1] + 0.1 * (target[10:] - bias[9:-1]), atol=1e-12)
 
 
+def test_warm_start_counts_only_the_updates_made():
+    # a frame whose residual the outlier guard refuses moves nothing, and the next update is still the second:
+    # its rate 1/2, the bias the mean of the two targets
+    est = estimator(0.1, warm_start=True, gate_sigmas=0.0)
+    people = [person_at(200, 5.0)]
+    first = run(est, people, 1)[-1]
+    t = 11 * 40_000_000
+    est.observe_scan(scan_of(people, t))
+    far = boxes_of(people, CALIBRATED.with_yaw_offset(math.radians(20.0)))  # 20 degrees off: beyond h_theta
+    step = est.update(t, far)
+    assert step.n_used == 0
+    assert est.bias_rad == pytest.approx(math.radians(first))
+    t = 12 * 40_000_000
+    est.observe_scan(scan_of(people, t))
+    jitter = FX * math.tan(math.radians(0.3)) * np.array([1.0, 0.0, 1.0, 0.0])  # a box 0.3 degree off
+    before = est.bias_rad
+    step = est.update(t, boxes_of(people) + jitter)
+    assert step.n_used == 1
+    target = before + step.mean_residual_rad
+    assert abs(target - before) > math.radians(0.1)
+    assert est.bias_rad == pytest.approx((before + target) / 2, abs=1e-12)  # rate 1/2, not 1/3
+
+
 def test_warm_start_after_20_updates_is_nearer_the_true_bias_than_a10_after_40():
     # 0.3 degrees of blob jitter: A10 alone after 40 updates still lags 3 (0.9)^40 = 0.044 degree behind; the
     # warm start's mean of 20 targets has no lag, only its noise (0.3 / sqrt(20) = 0.067 degree sigma, 0.054

@@ -84,7 +84,7 @@ class BiasParams:
         The ``n``-th update uses ``rho_n = max(rho, 1 / n)``, so the bias is the mean of its first ``1 / rho``
         targets ``b + ē`` (each a measurement of the whole bias) and is then smoothed at ``rho`` as A10's. A10
         alone starts at the calibrated camera and forgets that start slowly (a 3-degree error at ``rho = 0.1``
-        is 0.045 degree off after 40 updates); the mean has no such lag, and after ``n`` updates its noise is
+        is 0.044 degree off after 40 updates); the mean has no such lag, and after ``n`` updates its noise is
         that of A10's settled bias when ``n = (2 - rho) / rho`` (19 at 0.1), the variance of exponential
         smoothing. As MOG2 learns its background at ``1 / min(n, history)``. (The first update replaces an
         estimator's ``initial_bias_rad``.)

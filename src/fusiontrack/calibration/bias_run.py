@@ -402,11 +402,12 @@ def open_bias_inputs(path: str | Path, camera: str = "camera_0", lasers: Sequenc
 
 
 def bias_settled(bias_rad: Sequence[float], target_rad: Sequence[float], window: int, tol_rad: float) -> bool:
-    """Whether a bias learnt at a fixed rate has settled over its last ``window`` updates (a stop rule).
+    """Whether a bias learnt by A10 has settled over its last ``window`` updates (a stop rule).
 
     ``bias_rad[i]`` is the bias after update ``i`` and ``target_rad[i]`` that update's target
-    ``b* = b + ē`` (A10: ``b <- (1 - rho) b + rho b*``, ``b`` the bias before it, ``ē`` the update's mean
-    residual: what this frame's people say the bias is). Settled when, over the last ``window`` updates, either
+    ``b* = b + ē`` (A10: ``b <- (1 - rho) b + rho b*``, at a fixed ``rho`` or with the warm start's
+    ``max(rho, 1/n)``, ``b`` the bias before it, ``ē`` the update's mean residual: what this frame's people say the
+    bias is). Settled when, over the last ``window`` updates, either
 
     * the biases span at most ``tol_rad``: the bias has stopped moving; or
     * the last bias is within ``tol_rad`` of the targets' mean ``m``, two standard errors of that mean counted

@@ -459,11 +459,13 @@ class BiasLearning:
         ``1 / rho`` targets, then smoothed at ``rho``. Over 36 simulated 30 s crowds (a 3-degree error) and 36
         groups (none) the pass then stops after 48 and 90 camera frames on average, against 76 and 128 with A10's
         fixed rate and 40 updates, and ends closer to the simulator's bias: mean error 0.034 / 0.041 degree
-        against 0.046 / 0.049, with 34 of the 36 groups settled against 28.
-    min_updates : int
-        Updates (frames whose objects moved the bias) before the bias may be called settled [RECON] (20, the
-        ``settle_updates`` window; 40 without the warm start, which a 3-degree error at ``rho = 0.1`` needs to
-        come within 0.05 degree).
+        against 0.046 / 0.049, with 34 of the 36 groups settled against 28. (In the groups, whose camera is
+        not turned, there is no start to forget: A10 stopped at 20 updates does as well; on the crowds it ends
+        0.056 degree off, after 73 frames.)
+    min_updates : int or None
+        Updates (frames whose objects moved the bias) before the bias may be called settled [RECON]. None
+        (default): 20, the ``settle_updates`` window, with ``params.warm_start``; 40 without it, which a 3-degree
+        error at ``rho = 0.1`` needs to come within 0.05 degree (:attr:`required_updates`).
     settle_updates : int
         Over its last ``settle_updates`` values it has settled when they span at most ``tol_deg``, or when it is
         within ``tol_deg`` of the mean of those updates' targets, two standard errors counted against it
@@ -475,7 +477,7 @@ class BiasLearning:
     """
 
     params: BiasParams = field(default_factory=lambda: BiasParams(warm_start=True))
-    min_updates: int = 20
+    min_updates: int | None = None
     settle_updates: int = 20
     tol_deg: float = 0.1
     max_s: float = 12.0
@@ -483,6 +485,8 @@ class BiasLearning:
     def __post_init__(self) -> None:
         for name in ("min_updates", "settle_updates"):
             v = getattr(self, name)
+            if name == "min_updates" and v is None:
+                continue
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ConfigError(f"BiasLearning.{name}: expected an integer >= 1, got {v!r}")
         for name in ("tol_deg", "max_s"):
@@ -491,6 +495,13 @@ class BiasLearning:
                 raise ConfigError(f"BiasLearning.{name}: expected a finite value > 0, got {v!r}")
         if not isinstance(self.params, BiasParams):
             raise ConfigError(f"BiasLearning.params: expected BiasParams, got {type(self.params).__name__}")
+
+    @property
+    def required_updates(self) -> int:
+        """``min_updates``, or its default for ``params`` (20 with the warm start, 40 without)."""
+        if self.min_updates is not None:
+            return self.min_updates
+        return 20 if self.params.warm_start else 40
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -514,6 +525,10 @@ class CameraBias:
         The bias corrects the camera: settled, or standing out from its spread (:class:`BiasLearning`).
     seconds : float
         Processing time of the learning.
+    targets_rad : (updates,) float64
+        Each update's target ``b + ē`` (A10: the bias before it plus its mean residual), what that frame's
+        people said the bias was; the rule that stopped learning judges them (:func:`~fusiontrack.calibration.
+        bias_run.bias_settled`).
     """
 
     history: BiasHistory
@@ -523,6 +538,7 @@ class CameraBias:
     spread_rad: float
     applied: bool
     seconds: float
+    targets_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def bias_rad(self) -> float:
@@ -1579,7 +1595,7 @@ def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCame
 
     Like :func:`~fusiontrack.calibration.bias_run.bias_from_recording`, but stops as soon as the bias has
     settled, so that only the first seconds of the camera go through seed 000's vision path. Settled: at least
-    ``learning.min_updates`` updates, and over the last ``learning.settle_updates`` of them
+    ``learning.required_updates`` updates, and over the last ``learning.settle_updates`` of them
     :func:`~fusiontrack.calibration.bias_run.bias_settled` with ``tol_deg``: the bias spans at most
     ``tol_deg``, or it is within ``tol_deg`` of the mean of those updates' targets ``b + ē`` (two standard
     errors of the mean counted against it). The second test stops a bias that has caught up with its
@@ -1670,7 +1686,7 @@ def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCame
         if step.n_used:
             learnt.append(step.bias_rad)
             targets.append(before + step.mean_residual_rad)
-            if len(learnt) >= lp.min_updates and bias_settled(learnt, targets, lp.settle_updates, tol):
+            if len(learnt) >= lp.required_updates and bias_settled(learnt, targets, lp.settle_updates, tol):
                 settled = True
                 break
         if step.t_ns - first_ns >= lp.max_s * 1e9:
@@ -1678,7 +1694,7 @@ def learn_camera_bias(path: str | Path, camera_name: str, *, camera: PinholeCame
     spread = float(np.ptp(learnt[-lp.settle_updates:])) if len(learnt) >= lp.settle_updates else math.nan
     applied = settled or (np.isfinite(spread) and abs(est.bias_rad) > 2.0 * spread)
     return CameraBias(est.history, est.camera, est.corrected_camera if applied else est.camera, settled, spread,
-                      bool(applied), time.perf_counter() - tic)
+                      bool(applied), time.perf_counter() - tic, np.array(targets, np.float64))
 
 
 def track_fused(path: str | Path | Sequence[str | Path], *, params: FusionParams | None = None,
