@@ -163,7 +163,6 @@ def _is_tracks(path: Path) -> bool:
 def describe_tracks(path: Path) -> dict[str, Any]:
     """Facts about a tracks file (``fusiontrack track``'s tracks.jsonl or tracks.csv, or its folder): states, tracks,
     time span, classes, situations, the sensors that confirmed the states, image boxes and events."""
-    Counter = collections.Counter
     file = _tracks_file(path)
     states, events = _read_tracks(path)
     t = [s.t_ns for s in states]
@@ -171,13 +170,14 @@ def describe_tracks(path: Path) -> dict[str, Any]:
         "kind": "tracks", "paths": [str(file)], "states": len(states), "tracks": len({s.track_id for s in states}),
         "start_ns": min(t) if t else None, "end_ns": max(t) if t else None,
         "duration_s": (max(t) - min(t)) / 1e9 if t else 0.0,
-        "classes": dict(Counter(str(s.cls) for s in states).most_common()),
-        "situations": dict(Counter(str(s.situation) for s in states).most_common()),
-        "confirmed_by": dict(Counter(x for s in states for x in s.sensors).most_common()),
-        "image_boxes": dict(Counter(s.camera or "camera" for s in states if s.box_px is not None).most_common()),
+        "classes": dict(collections.Counter(str(s.cls) for s in states).most_common()),
+        "situations": dict(collections.Counter(str(s.situation) for s in states).most_common()),
+        "confirmed_by": dict(collections.Counter(x for s in states for x in s.sensors).most_common()),
+        "image_boxes": dict(collections.Counter(s.camera or "camera" for s in states
+                                                if s.box_px is not None).most_common()),
     }
     if file.suffix != ".csv":
-        out["events"] = dict(Counter(e.kind for e in events).most_common())
+        out["events"] = dict(collections.Counter(e.kind for e in events).most_common())
     return out
 
 
