@@ -307,14 +307,15 @@ def test_warm_start_bias_is_the_mean_of_its_first_targets_then_a10():
 
 
 def test_warm_start_counts_only_the_updates_made():
-    # a frame whose residual the outlier guard refuses moves nothing, and the next update is still the second:
-    # its rate 1/2, the bias the mean of the two targets
+    # a frame that makes no update (its box 20 degrees off: no valid cluster in its region, or a residual beyond
+    # A10's h_theta) moves nothing, and the next update is still the second: its rate 1/2, the bias the mean of
+    # the two targets
     est = estimator(0.1, warm_start=True, gate_sigmas=0.0)
     people = [person_at(200, 5.0)]
     first = run(est, people, 1)[-1]
     t = 11 * 40_000_000
     est.observe_scan(scan_of(people, t))
-    far = boxes_of(people, CALIBRATED.with_yaw_offset(math.radians(20.0)))  # 20 degrees off: beyond h_theta
+    far = boxes_of(people, CALIBRATED.with_yaw_offset(math.radians(20.0)))
     step = est.update(t, far)
     assert step.n_used == 0
     assert est.bias_rad == pytest.approx(math.radians(first))
