@@ -322,10 +322,10 @@ def test_eval_names_the_cause_of_each_id_switch(tmp_path):
     (tmp_path / "tracks.csv").write_text("\n".join(tracks) + "\n")
     out = tmp_path / "m.json"
     printed = run("eval", str(tmp_path / "tracks.csv"), str(tmp_path / "truth.csv"), "-o", str(out)).stdout
-    assert "ID switches by cause: exchange 2, reborn 0, new track 0, takeover 0" in printed
+    assert "ID switches by cause: exchange 2, reborn 0, shared 0, new track 0, takeover 0" in printed
     result = json.loads(out.read_text())
     assert result["metrics"]["id_switches"] == 2
-    assert result["id_switch_causes"] == {"exchange": 2, "reborn": 0, "new_track": 0, "takeover": 0}
+    assert result["id_switch_causes"] == {"exchange": 2, "reborn": 0, "shared": 0, "new_track": 0, "takeover": 0}
     assert sorted((w["gt_id"], w["from_track"], w["to_track"]) for w in result["id_switches"]) == [(1, 1, 2),
                                                                                                    (2, 2, 1)]
     assert {w["t_ns"] for w in result["id_switches"]} == {105_000_000_000}

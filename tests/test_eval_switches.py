@@ -57,7 +57,35 @@ def test_each_story_gets_its_cause():
     assert by_person[3].last_ns == T0_NS + 39 * DT_NS  # matched track 3 last at frame 39
     assert by_person[3].t_ns == T0_NS + 45 * DT_NS
     assert len(switches) == evaluate_floor(gt, st, 0.5).id_switches
-    assert switch_cause_counts(switches) == {"exchange": 2, "reborn": 1, "new_track": 1, "takeover": 1}
+    assert switch_cause_counts(switches) == {"exchange": 2, "reborn": 1, "shared": 0, "new_track": 1, "takeover": 1}
+
+
+def _side_by_side() -> np.ndarray:
+    """Two people walking side by side 0.6 m apart (people 1 and 2), (N, 2, 2)."""
+    t = np.arange(N) * 0.1
+    return np.stack([np.column_stack([t, np.zeros(N)]), np.column_stack([t, np.full(N, 0.6)])], axis=1)
+
+
+@pytest.mark.parametrize("own_track", [False, True])
+def test_a_track_shared_by_two_walkers_side_by_side(own_track):
+    """Track 1 follows two people walking side by side as one, 0.25 m from person 1 and 0.35 m from person 2 (person
+    1 is its match); at frame 50 it settles on person 2 and a new track 2 is born on person 1. Person 1 had the only
+    track there was: ``shared``. With a track of its own on person 2 before (``own_track``), track 1 drifted off
+    person 1 onto somebody tracked: ``new_track``."""
+    xy = _side_by_side()
+    st = []
+    for k in range(N):
+        st.append(_state(k, 1, xy[k, 0] + [0.0, 0.25] if k < 50 else xy[k, 1]))
+        if k >= 50:
+            st.append(_state(k, 2, xy[k, 0]))
+        if own_track and k < 45:
+            st.append(_state(k, 3, xy[k, 1] + [0.0, 0.1]))
+    switches = id_switch_causes(frame_matches(_truth(xy), st, 0.5), st)
+    assert [(s.gt_id, s.from_track, s.to_track) for s in switches] == [(1, 1, 2)] + ([(2, 3, 1)] if own_track else [])
+    assert switches[0].cause == ("new_track" if own_track else "shared")
+    # the window: track 3 ended 0.5 s before the switch; looking back only 0.4 s, person 2 had no track but 1
+    if own_track:
+        assert id_switch_causes(frame_matches(_truth(xy), st, 0.5), st, shared_s=0.4)[0].cause == "shared"
 
 
 def test_an_exchange_needs_both_directions_within_the_window():
@@ -121,3 +149,5 @@ def test_the_causes_add_up_to_trackeval_id_switches(seed):
 def test_bad_windows_are_refused():
     with pytest.raises(ValueError, match="new_s"):
         id_switch_causes(frame_matches(_truth(_people(1)), [], 0.5), [], new_s=-1.0)
+    with pytest.raises(ValueError, match="shared_s"):
+        id_switch_causes(frame_matches(_truth(_people(1)), [], 0.5), [], shared_s=float("nan"))

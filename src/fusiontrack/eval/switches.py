@@ -3,8 +3,9 @@
 CLEAR's ID switches (:attr:`fusiontrack.eval.Metrics.id_switches`) count every time a person's matched track
 changes; they do not say why. The cure differs with the cause: two people who *exchange* tracks when they meet
 need appearance (seed 001's classifiers at a merge or split), a track *lost* and replaced by a new one needs better
-continuity (coasting through occlusions, re-identification), and an older track *taking over* a person whose own
-track drifted off needs better association. :func:`id_switch_causes` labels each switch of a run's CLEAR matches
+continuity (coasting through occlusions, re-identification), a track *shared* by two people walking side by side
+needs a detector that sees them as two, and an older track *taking over* a person whose own track drifted off needs
+better association. :func:`id_switch_causes` labels each switch of a run's CLEAR matches
 (:func:`fusiontrack.eval.frame_matches`), so a benchmark can show which of these a tracker suffers from.
 
 A switch of person ``g`` from track ``a`` to track ``b`` at ``t`` (``g`` matched ``a`` last, ``b`` now) is
@@ -13,6 +14,11 @@ A switch of person ``g`` from track ``a`` to track ``b`` at ``t`` (``g`` matched
   exchanged their people (each such pair counts two switches, as CLEAR counts them);
 * ``reborn`` — else, ``b`` began within ``new_s`` before ``t`` and ``a`` ended by ``t + ended_s``: the person's
   track was lost and a new one started (re-identification's case);
+* ``shared`` — else, ``b`` began within ``new_s`` before ``t`` while ``a`` goes on, and within ``shared_s`` after
+  ``t`` ``a`` is matched to another person who, over the ``shared_s`` before ``t``, was matched to no track but
+  ``a``: ``a`` had been following two people as one (two people walking side by side, whom the detector saw as
+  one), and when they parted the new track took this one. The person had no track of its own to keep: no
+  appearance at a meeting can give one back, better detection (seeing the two as two) can;
 * ``new_track`` — else, ``b`` began within ``new_s`` before ``t`` while ``a`` goes on: a new track took the person
   from a track that drifted off (onto somebody else, or onto nothing);
 * ``takeover`` — else: an older track, which was following somebody else or nobody, took the person.
@@ -26,12 +32,14 @@ from collections import Counter
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..types import Track, TrackState
 from .mot import FrameMatches
 
 __all__ = ["SWITCH_CAUSES", "IdSwitch", "id_switch_causes", "switch_cause_counts"]
 
-SWITCH_CAUSES = ("exchange", "reborn", "new_track", "takeover")
+SWITCH_CAUSES = ("exchange", "reborn", "shared", "new_track", "takeover")
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,7 +75,7 @@ def _extend(span: dict[int, list[int]], tid: int, lo: int, hi: int) -> None:
 
 
 def id_switch_causes(matches: FrameMatches, tracks: Iterable[TrackState | Track], *, exchange_s: float = 3.0,
-                     new_s: float = 2.0, ended_s: float = 0.5) -> list[IdSwitch]:
+                     new_s: float = 2.0, ended_s: float = 0.5, shared_s: float = 1.0) -> list[IdSwitch]:
     """Every CLEAR identity switch of a run, with its cause (module docstring), in time order.
 
     Parameters
@@ -76,36 +84,57 @@ def id_switch_causes(matches: FrameMatches, tracks: Iterable[TrackState | Track]
         The run's CLEAR matches (:func:`fusiontrack.eval.frame_matches` of the same ground truth and tracks).
     tracks : iterable of TrackState or Track
         The tracks those matches were made from: their first and last times.
-    exchange_s, new_s, ended_s : float
+    exchange_s, new_s, ended_s, shared_s : float
         The windows of the rules, s.
     """
-    for name, v in (("exchange_s", exchange_s), ("new_s", new_s), ("ended_s", ended_s)):
+    for name, v in (("exchange_s", exchange_s), ("new_s", new_s), ("ended_s", ended_s), ("shared_s", shared_s)):
         if not v >= 0:
             raise ValueError(f"{name}: expected a value >= 0, got {v!r}")
     life = _lifetimes(tracks)
     last: dict[int, tuple[int, int]] = {}  # person -> (track, time) of its last match
     raw: list[tuple[int, int, int, int, int]] = []  # (t, person, from, to, last time)
+    by_person: dict[int, list[tuple[int, int]]] = {}  # person -> [(time, track)] of its matches
     for t, frame in zip(matches.t_ns.tolist(), matches.matches, strict=True):
         for tid, g in sorted(frame.items(), key=lambda kv: kv[1]):
             prev = last.get(g)
             if prev is not None and prev[0] != tid:
                 raw.append((t, g, prev[0], tid, prev[1]))
             last[g] = (tid, t)
+            by_person.setdefault(g, []).append((t, tid))
     by_pair: dict[tuple[int, int], list[tuple[int, int]]] = {}  # (from, to) -> [(time, person)]
     for t, g, a, b, _ in raw:
         by_pair.setdefault((a, b), []).append((t, g))
     ex_ns, new_ns, end_ns = round(exchange_s * 1e9), round(new_s * 1e9), round(ended_s * 1e9)
+    shared_ns = round(shared_s * 1e9)
     out = []
     for t, g, a, b, t_last in raw:
         if any(g2 != g and abs(t2 - t) <= ex_ns for t2, g2 in by_pair.get((b, a), ())):  # (another person: one
             # person taken by another track and given back is two takeovers)
             cause = "exchange"
         elif b in life and life[b][0] >= t - new_ns:
-            cause = "reborn" if a in life and life[a][1] <= t + end_ns else "new_track"
+            if a in life and life[a][1] <= t + end_ns:
+                cause = "reborn"
+            else:
+                cause = "shared" if _shared(matches, by_person, t, t_last, g, a, shared_ns) else "new_track"
         else:
             cause = "takeover"
         out.append(IdSwitch(t, g, a, b, t_last, cause))
     return out
+
+
+def _shared(matches: FrameMatches, by_person: Mapping[int, list[tuple[int, int]]], t: int, t_last: int, g: int,
+            a: int, window_ns: int) -> bool:
+    """Whether track ``a``, which person ``g`` matched last at ``t_last`` and left for another track at ``t``, is
+    matched after ``t_last`` and up to ``window_ns`` after ``t`` to another person who, over the ``window_ns`` before
+    ``t``, was matched to no track but ``a`` (module docstring)."""
+    times, gts = matches.by_track.get(a, (np.empty(0, np.int64), np.empty(0, np.int64)))
+    k = int(np.searchsorted(times, t_last, side="right"))
+    after = gts[k:int(np.searchsorted(times, t + window_ns, side="right"))]
+    others = after[after != g]
+    if not len(others):
+        return False  # ``a`` went on with nobody (drifted onto nothing)
+    o = int(others[0])
+    return all(tid == a for tt, tid in by_person.get(o, ()) if t - window_ns <= tt < t)
 
 
 def switch_cause_counts(switches: Iterable[IdSwitch] | Iterable[Mapping[str, int]]) -> dict[str, int]:
