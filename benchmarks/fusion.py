@@ -21,8 +21,11 @@ The comparison is paired: for the same seed, fusion's laser tracker draws the ra
 so where the camera changes nothing the two give the same tracks, and every difference is the camera's doing.
 
 A second table splits the ID switches by cause (:mod:`fusiontrack.eval.switches`): two tracks exchanging their people
-(what the classifiers at a meeting can fix), a track lost and reborn (re-identification's case), a new track taking a
-person from a track that drifted off, an older track taking over.
+(what the classifiers at a meeting can fix), a track lost and reborn (re-identification's case), a track that had
+followed two people walking side by side as one losing one of them to a new track when they parted (the person never
+had a track of its own: better detection's case, not the camera's), a new track taking a person from a track that
+drifted off, an older track taking over. The ID-switch target's row says how many of laser-only's switches are of the
+two kinds seed 001's camera repairs, and so how low fusion could go if it repaired every one of them.
 
 Columns: MOTA, IDF1, IDF1 ceiling, HOTA (floor, match 0.5 m), ID switches, merge/split events resolved correctly
 out of all true ones, and time per frame. The IDF1 ceiling (:attr:`fusiontrack.eval.Metrics.idf1_ceiling`) is the
@@ -413,8 +416,10 @@ def main() -> None:
 
     why = Table(title="ID switches by cause (summed over seeds; fusiontrack.eval.switches)", header_style="bold",
                 caption="exchange: two tracks exchanged their people (what appearance at a meeting can fix); reborn: "
-                        "the person's track ended and a new one took over; new track: a new one took the person from "
-                        "a track that drifted off; takeover: an older track took the person")
+                        "the person's track ended and a new one took over (re-identification's case); shared: one "
+                        "track had followed two people walking side by side as one, and a new one took this person "
+                        "when they parted; new track: a new one took the person from a track that drifted off; "
+                        "takeover: an older track took the person")
     for col in ("scenario", "system", "IDSW", *(c.replace("_", " ") for c in SWITCH_CAUSES)):
         why.add_column(col, justify="left" if col in ("scenario", "system") else "right")
     for name in ("crowd", "groups"):
@@ -472,6 +477,12 @@ def main() -> None:
     by_draw = {draw: {k: sum(per_draw[(n, draw)][k]["idsw"] for n in ("crowd", "groups")) for k in ("laser", "fusion")}
                for draw in args.rng}
     each = "; ".join(f"draw {draw}: {v['fusion']} vs {v['laser']}" for draw, v in by_draw.items())
+    # the switches seed 001's camera is asked about: exchanges at meetings (identity checks) and reborn tracks
+    # (re-identification); fusion's laser tracker draws laser-only's particles, so the rest of laser-only's switches
+    # stay about as they are however well the camera does its part
+    laser_causes = switch_cause_counts(r["draws"][draw]["laser"]["causes"] for r in results.values()
+                                       for draw in args.rng)
+    repairable = laser_causes["exchange"] + laser_causes["reborn"]
     ms = {k: float(np.mean([summary[(n, k)]["ms"] for n in ("crowd", "groups")])) for k, _ in systems}
     checks = [
         ("fusion resolves >= 90 % of merge/split events",
@@ -479,7 +490,10 @@ def main() -> None:
          if nz["fusion"] else "no true merge/split event in these scenes",
          share["fusion"] >= 0.9 if nz["fusion"] else None),
         ("fusion ID switches <= half of laser-only's", f"{idsw['fusion']} vs {idsw['laser']}"
-         + (f" ({each})" if len(args.rng) > 1 else ""), idsw["fusion"] <= 0.5 * idsw["laser"]),
+         + (f" ({each})" if len(args.rng) > 1 else "")
+         + f"; {repairable} of laser-only's are exchanges or reborn tracks, the kinds seed 001's camera repairs: with "
+           f"all of them repaired fusion would have about {idsw['laser'] - repairable}",
+         idsw["fusion"] <= 0.5 * idsw["laser"]),
         ("fusion IDF1 >= laser-only + 0.10 (or >= 0.95)", f"{idf1['fusion']:.3f} vs {idf1['laser']:.3f}; with "
          f"perfect identities fusion's positions would reach {ceiling:.3f} (IDF1 ceiling)",
          idf1["fusion"] >= min(idf1["laser"] + 0.10, 0.95)),
