@@ -2,8 +2,10 @@
 
 * :mod:`.mot` — CLEAR MOT, identity and HOTA metrics on floor-plane distances or image boxes.
 * :mod:`.situations` — true counts, detections and false alarms of merge/split/correlated/appear/disappear.
-* :mod:`.switches` — the cause of each identity switch (two tracks exchanging people, a track lost and replaced, an
-  older track taking over).
+* :mod:`.switches` — the cause of each identity switch (two tracks exchanging people, a track lost and replaced, a
+  track shared by two people walking side by side, an older track taking over).
+* :mod:`.appearance` — how well seed 001's classifiers tell people apart in a video with detections, without
+  annotated identities (imported on its own: it needs the vision package).
 """
 
 from .errors import EvaluationError

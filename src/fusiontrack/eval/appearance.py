@@ -1,0 +1,173 @@
+"""How well seed 001's appearance classifiers tell people apart in a video, without annotated identities.
+
+The fused tracker trusts its per-target classifiers (B14, B15) to say, after two people met, whether their tracks
+still follow the same people (the identity checks) and who a reborn track is (re-identification). Whether they can
+depends on the camera: its resolution, the light, the people's clothes. :func:`neighbour_evidence` measures it on a
+video with person detections (e.g. MOTChallenge's public ones) the way the fused tracker uses the classifiers:
+
+* identities come from :func:`iou_tracklets`: a detection continues a tracklet of the previous frame only where the
+  link is unambiguous (mutual best overlap, well ahead of the second best); wherever it is not, a new tracklet
+  starts. A tracklet may thus cut one person's path into pieces, but it should not join two people, so it is a
+  truth the classifiers are not part of;
+* test then train, frame by frame: every ``test_every`` frames each trained target whose box is clear (at most
+  ``max_overlap`` of it inside another box) scores its own box and the clear boxes of its neighbours (bottom centres
+  within ``near`` box heights); its *evidence* is its confidence on its own box minus that on the neighbour's, in
+  ``[-2, 2]``, positive when it tells them apart the right way round (the identity checks' evidence,
+  :class:`~fusiontrack.fusion.FusionParams`). Then the targets with a neighbour learn (B15's rule, in the image),
+  each at most every ``train_every`` frames, with the neighbours as negatives.
+
+:meth:`NeighbourEvidence.verdicts` turns the evidence into the identity checks' verdicts: the mean over a pair's
+first ``n`` scores, beyond ``± margin``.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..io.tracks import MotBoxes
+from ..vision.appearance import AppearanceBank, AppearanceParams
+from ..vision.people import box_containment, box_iou
+
+__all__ = ["NeighbourEvidence", "iou_tracklets", "neighbour_evidence"]
+
+
+def iou_tracklets(frame: np.ndarray, boxes_xyxy: np.ndarray, *, min_iou: float = 0.3, ratio: float = 0.5
+                  ) -> np.ndarray:
+    """Tracklet ids ``(n,) int64`` of detections (rows in any order) linked only where the link is unambiguous.
+
+    A detection of frame ``f`` continues the tracklet of a detection of frame ``f - 1`` when each is the other's
+    best overlap (IoU), that IoU is at least ``min_iou``, and each one's second best is below ``ratio`` times it;
+    otherwise it starts a tracklet. Ids are numbered from 0 in order of appearance.
+    """
+    if not 0 < min_iou <= 1:
+        raise ValueError(f"min_iou: expected a value in (0, 1], got {min_iou!r}")
+    if not 0 <= ratio <= 1:
+        raise ValueError(f"ratio: expected a value in [0, 1], got {ratio!r}")
+    frame = np.asarray(frame, np.int64)
+    boxes = np.asarray(boxes_xyxy, np.float64).reshape(-1, 4)
+    if len(frame) != len(boxes):
+        raise ValueError(f"frame and boxes_xyxy: expected as many rows, got {len(frame)} and {len(boxes)}")
+    out = np.full(len(frame), -1, np.int64)
+    order = np.argsort(frame, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(frame[order]) != 0, True])
+    next_id = 0
+    prev_rows, prev_frame = np.empty(0, np.int64), None
+    for lo, hi in itertools.pairwise(starts):
+        rows = order[lo:hi]
+        f = int(frame[rows[0]])
+        if prev_frame == f - 1 and len(prev_rows):
+            iou = box_iou(boxes[prev_rows], boxes[rows])  # (previous, current)
+            best_prev, best_cur = iou.argmax(axis=0), iou.argmax(axis=1)
+            top = np.sort(iou, axis=0)[::-1]
+            second_cur = top[1] if len(prev_rows) > 1 else np.zeros(len(rows))
+            side = np.sort(iou, axis=1)[:, ::-1]
+            second_prev = side[:, 1] if len(rows) > 1 else np.zeros(len(prev_rows))
+            for j in range(len(rows)):
+                i = best_prev[j]
+                v = iou[i, j]
+                if (v >= min_iou and best_cur[i] == j and second_cur[j] < ratio * v
+                        and second_prev[i] < ratio * v):
+                    out[rows[j]] = out[prev_rows[i]]
+        for r in rows:
+            if out[r] < 0:
+                out[r] = next_id
+                next_id += 1
+        prev_rows, prev_frame = rows, f
+    return out
+
+
+@dataclass(frozen=True)
+class NeighbourEvidence:
+    """The scores of :func:`neighbour_evidence`, one row per (target, neighbour, frame) scored.
+
+    Attributes
+    ----------
+    evidence : (n,) float64
+        Own box's confidence minus the neighbour's box's, by the target's classifier, in ``[-2, 2]``.
+    frame, target, neighbour : (n,) int64
+        The frame and the two tracklets.
+    """
+
+    evidence: np.ndarray
+    frame: np.ndarray
+    target: np.ndarray
+    neighbour: np.ndarray
+
+    def right_sign(self) -> float:
+        """The share of scores with evidence > 0 (NaN without scores)."""
+        return float(np.mean(self.evidence > 0)) if self.evidence.size else float("nan")
+
+    def verdicts(self, n: int = 3, margin: float = 0.6) -> dict[str, int]:
+        """Over every (target, neighbour) with at least ``n`` scores, the mean of its first ``n``: ``keep`` (>=
+        ``margin``: right), ``exchange`` (<= ``-margin``: a wrong exchange had the check been asked) or
+        ``undecided``."""
+        out = {"keep": 0, "exchange": 0, "undecided": 0}
+        order = np.lexsort((self.frame, self.neighbour, self.target))
+        pairs = np.stack([self.target[order], self.neighbour[order]], axis=1)
+        starts = np.flatnonzero(np.r_[True, (np.diff(pairs, axis=0) != 0).any(axis=1)])
+        ends = np.r_[starts[1:], len(order)]
+        for lo, hi in zip(starts, ends, strict=True):
+            if hi - lo >= n:
+                mean = float(self.evidence[order[lo:lo + n]].mean())
+                out["keep" if mean >= margin else "exchange" if mean <= -margin else "undecided"] += 1
+        return out
+
+
+def neighbour_evidence(images: Iterable[tuple[int, np.ndarray]], detections: MotBoxes, *,
+                       params: AppearanceParams | None = None, rng: int | None = 0, near: float = 1.5,
+                       max_overlap: float = 0.3, test_every: int = 3, train_every: int = 2,
+                       min_iou: float = 0.3) -> NeighbourEvidence:
+    """Test-then-train evidence of seed 001's classifiers on a video (module docstring).
+
+    Parameters
+    ----------
+    images : iterable of (frame, BGR image)
+        The video's frames, numbered as ``detections`` number them, in order.
+    detections : MotBoxes
+        Person boxes in those images' pixels (``MotBoxes.scaled`` to resize).
+    params, rng :
+        Of the :class:`~fusiontrack.vision.appearance.AppearanceBank`.
+    near, max_overlap, test_every, train_every, min_iou : see the module docstring (``min_iou``: of
+        :func:`iou_tracklets`).
+    """
+    boxes_all = detections.boxes_xyxy
+    ids_all = iou_tracklets(detections.frame, boxes_all, min_iou=min_iou)
+    bank = AppearanceBank(params or AppearanceParams(), rng=rng)
+    last_train: dict[int, int] = {}
+    ev: list[float] = []
+    meta: list[tuple[int, int, int]] = []
+    for f, img in images:
+        rows = detections.rows_at(int(f))
+        if len(rows) < 2:
+            continue
+        b, ids = boxes_all[rows], ids_all[rows]
+        bottom = np.column_stack([(b[:, 0] + b[:, 2]) / 2, b[:, 3]])
+        h = b[:, 3] - b[:, 1]
+        close = np.linalg.norm(bottom[:, None] - bottom[None], axis=2) < near * np.maximum(h[:, None], h[None])
+        np.fill_diagonal(close, False)
+        inside = box_containment(b, b)
+        np.fill_diagonal(inside, 0.0)
+        clear = inside.max(axis=1) <= max_overlap
+        if int(f) % test_every == 0:
+            for k in np.flatnonzero(clear):
+                tid = int(ids[k])
+                others = np.flatnonzero(close[k] & clear)
+                if not others.size or not bank.is_trained(tid):
+                    continue
+                sc = bank.box_scores(img, b[np.r_[k, others]], [tid])[:, 0]
+                for j, v in zip(others, sc[1:], strict=True):
+                    if np.isfinite(sc[0] - v):
+                        ev.append(float(sc[0] - v))
+                        meta.append((int(f), tid, int(ids[j])))
+        learners = [int(ids[k]) for k in np.flatnonzero(close.any(axis=1))
+                    if int(f) - last_train.get(int(ids[k]), -(1 << 30)) >= train_every]
+        if learners:
+            bank.train(img, {int(t): b[k] for k, t in enumerate(ids)}, train_ids=learners,
+                       force_update=any(not bank.is_trained(t) for t in learners))
+            last_train.update((t, int(f)) for t in learners)
+    m = np.array(meta, np.int64).reshape(-1, 3)
+    return NeighbourEvidence(np.array(ev, np.float64), m[:, 0], m[:, 1], m[:, 2])
