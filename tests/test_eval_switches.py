@@ -66,13 +66,20 @@ def _side_by_side() -> np.ndarray:
     return np.stack([np.column_stack([t, np.zeros(N)]), np.column_stack([t, np.full(N, 0.6)])], axis=1)
 
 
+def _causes(xy: np.ndarray, st: list[TrackState], **kw) -> list[tuple[int, int, int, str]]:
+    gt = _truth(xy)
+    return [(s.gt_id, s.from_track, s.to_track, s.cause) for s in id_switch_causes(frame_matches(gt, st, 0.5), st,
+                                                                                    **kw)]
+
+
 @pytest.mark.parametrize("own_track", [False, True])
 def test_a_track_shared_by_two_walkers_side_by_side(own_track):
     """Track 1 follows two people walking side by side as one, 0.25 m from person 1 and 0.35 m from person 2 (person
     1 is its match); at frame 50 it settles on person 2 and a new track 2 is born on person 1. Person 1 had the only
-    track there was: ``shared``. With a track of its own on person 2 before (``own_track``), track 1 drifted off
-    person 1 onto somebody tracked: ``new_track``."""
+    track there was: ``shared``. With a track of its own on person 2 until frame 44 (``own_track``), track 1 drifted
+    off person 1 onto somebody tracked: ``new_track``."""
     xy = _side_by_side()
+    gt = _truth(xy)
     st = []
     for k in range(N):
         st.append(_state(k, 1, xy[k, 0] + [0.0, 0.25] if k < 50 else xy[k, 1]))
@@ -80,38 +87,52 @@ def test_a_track_shared_by_two_walkers_side_by_side(own_track):
             st.append(_state(k, 2, xy[k, 0]))
         if own_track and k < 45:
             st.append(_state(k, 3, xy[k, 1] + [0.0, 0.1]))
-    switches = id_switch_causes(frame_matches(_truth(xy), st, 0.5), st)
-    assert [(s.gt_id, s.from_track, s.to_track) for s in switches] == [(1, 1, 2)] + ([(2, 3, 1)] if own_track else [])
-    assert switches[0].cause == ("new_track" if own_track else "shared")
-    # the window: track 3 ended 0.5 s before the switch; looking back only 0.4 s, person 2 had no track but 1
-    if own_track:
-        assert id_switch_causes(frame_matches(_truth(xy), st, 0.5), st, shared_s=0.4)[0].cause == "shared"
+    got = _causes(xy, st, truth=gt)
+    assert [w[:3] for w in got] == [(1, 1, 2)] + ([(2, 3, 1)] if own_track else [])
+    assert got[0][3] == ("new_track" if own_track else "shared")
+    # without the truth, the two walking together is not known: person 2 was never matched to track 1 before
+    assert _causes(xy, st)[0][3] == "new_track"
+    if own_track:  # track 3's last state is 0.6 s before the switch: looking back only 0.4 s, person 2 had no track
+        assert _causes(xy, st, truth=gt, shared_s=0.4)[0][3] == "shared"
+        assert _causes(xy, st, truth=gt, shared_s=0.4, shared_m=0.5)[0][3] == "new_track"  # (0.6 m apart)
 
 
-def test_an_exchange_needs_both_directions_within_the_window():
-    # track 1 takes person 2 at frame 30 (3 s); track 2, off on nobody meanwhile, takes person 1 at frame 80 (8 s)
-    xy = _people(2)
-    far = np.array([50.0, 50.0])
+def test_without_the_truth_a_shared_track_is_known_by_its_matches():
+    # as above, but track 1 wavers: on person 1, and every 7th frame on person 2, before settling there at frame 50
+    xy = _side_by_side()
     st = []
     for k in range(N):
-        st.append(_state(k, 1, xy[k, 0] if k < 30 else xy[k, 1]))
-        st.append(_state(k, 2, xy[k, 1] if k < 30 else far if k < 80 else xy[k, 0]))
-    m = frame_matches(_truth(xy), st, 0.5)
-    assert [(s.gt_id, s.cause) for s in id_switch_causes(m, st)] == [(2, "takeover"), (1, "takeover")]
-    assert [s.cause for s in id_switch_causes(m, st, exchange_s=5.0)] == ["exchange", "exchange"]
+        off = 0.55 if k % 7 == 3 else 0.05
+        st.append(_state(k, 1, xy[k, 0] + [0.0, off] if k < 50 else xy[k, 1]))
+        if k >= 50:
+            st.append(_state(k, 2, xy[k, 0]))
+    switches = _causes(xy, st)
+    assert (1, 1, 2, "shared") in switches
 
 
-def test_a_person_taken_and_given_back_is_no_exchange():
-    # track 2, alive far off from the start, takes person 1 for 3 frames; track 1 takes it back: one person, no
-    # exchange between two (review: both switches were labelled exchange)
-    xy = _people(1)
-    far = np.array([50.0, 50.0])
-    st = []
-    for k in range(N):
-        st.append(_state(k, 1, xy[k, 0] if not 40 <= k < 43 else far))
-        st.append(_state(k, 2, xy[k, 0] if 40 <= k < 43 else far + np.array([k, 0.0])))
-    switches = id_switch_causes(frame_matches(_truth(xy), st, 0.5), st)
-    assert [(s.from_track, s.to_track, s.cause) for s in switches] == [(1, 2, "takeover"), (2, 1, "takeover")]
+def test_a_track_that_drifts_far_or_onto_a_newcomer_is_no_shared_track():
+    """Person 1's track 1 leaves it at frame 50 for a person nobody tracked, and a new track 2 takes person 1. Far
+    away (4 m), or a person coming into view only then, or settling on the other person only 1.5 s after the switch:
+    ``new_track``, not ``shared``."""
+    t = np.arange(N) * 0.1
+    base = np.column_stack([t, np.zeros(N)])
+    for story in ("far", "newcomer", "late"):
+        other = np.column_stack([t, np.full(N, 4.0 if story == "far" else 0.6)])
+        xy = np.stack([base, other], axis=1)
+        gt = _truth(xy)
+        if story == "newcomer":  # person 2 is in the truth from frame 50 only
+            gt = [g if k >= 50 else GroundTruth(t_ns=g.t_ns, sensor="sim", frame_id="world", ids=g.ids[:1],
+                                                 positions_m=g.positions_m[:1]) for k, g in enumerate(gt)]
+        st = []
+        for k in range(N):
+            if story == "late":  # off onto nobody for 1.5 s, then onto person 2
+                st.append(_state(k, 1, xy[k, 0] if k < 50 else np.array([50.0, 50.0]) if k < 65 else xy[k, 1]))
+            else:
+                st.append(_state(k, 1, xy[k, 0] if k < 50 else xy[k, 1]))
+            if k >= 50:
+                st.append(_state(k, 2, xy[k, 0]))
+        switches = id_switch_causes(frame_matches(gt, st, 0.5), st, truth=gt)
+        assert [(s.gt_id, s.from_track, s.to_track, s.cause) for s in switches] == [(1, 1, 2, "new_track")], story
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -151,3 +172,5 @@ def test_bad_windows_are_refused():
         id_switch_causes(frame_matches(_truth(_people(1)), [], 0.5), [], new_s=-1.0)
     with pytest.raises(ValueError, match="shared_s"):
         id_switch_causes(frame_matches(_truth(_people(1)), [], 0.5), [], shared_s=float("nan"))
+    with pytest.raises(ValueError, match="shared_m"):
+        id_switch_causes(frame_matches(_truth(_people(1)), [], 0.5), [], shared_m=-1.0)

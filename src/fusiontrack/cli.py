@@ -1293,7 +1293,7 @@ def eval_(
         console.print(metrics_table({label: metrics}, title=f"tracking, match within {threshold:g} m"))
         result["metrics"] = metrics.to_dict()
         # what kind of identity errors: where to look, and what would cure them (the JSON has the keys always)
-        switches = id_switch_causes(frame_matches(scored, states, threshold_m=threshold), states) \
+        switches = id_switch_causes(frame_matches(scored, states, threshold_m=threshold), states, truth=scored) \
             if metrics.id_switches else []
         counts = switch_cause_counts(switches)
         if switches:

@@ -14,11 +14,13 @@ A switch of person ``g`` from track ``a`` to track ``b`` at ``t`` (``g`` matched
   exchanged their people (each such pair counts two switches, as CLEAR counts them);
 * ``reborn`` — else, ``b`` began within ``new_s`` before ``t`` and ``a`` ended by ``t + ended_s``: the person's
   track was lost and a new one started (re-identification's case);
-* ``shared`` — else, ``b`` began within ``new_s`` before ``t`` while ``a`` goes on, and within ``shared_s`` after
-  ``t`` ``a`` is matched to another person who, over the ``shared_s`` before ``t``, was matched to no track but
-  ``a``: ``a`` had been following two people as one (two people walking side by side, whom the detector saw as
-  one), and when they parted the new track took this one. The person had no track of its own to keep: no
-  appearance at a meeting can give one back, better detection (seeing the two as two) can;
+* ``shared`` — else, ``b`` began within ``new_s`` before ``t`` while ``a`` goes on, ``a`` is matched to another
+  person ``o`` within ``shared_s`` of ``t`` (before or after; after ``g`` left it), ``o`` was matched to no track
+  but ``a`` over the ``shared_s`` before ``t``, and the two people walked together then: with the ground truth, both
+  present and at most ``shared_m`` apart throughout; without it, ``o`` matched to ``a`` at least once. ``a`` had
+  been following two people as one (two people walking side by side, whom the detector saw as one), and when they
+  parted the new track took this one. The person had no track of its own to keep: no appearance at a meeting can
+  give one back, better detection (seeing the two as two) can;
 * ``new_track`` — else, ``b`` began within ``new_s`` before ``t`` while ``a`` goes on: a new track took the person
   from a track that drifted off (onto somebody else, or onto nothing);
 * ``takeover`` — else: an older track, which was following somebody else or nobody, took the person.
@@ -29,12 +31,12 @@ The labels cover every switch CLEAR counts, so their counts sum to the run's ``i
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..types import Track, TrackState
+from ..types import GroundTruth, Track, TrackState
 from .mot import FrameMatches
 
 __all__ = ["SWITCH_CAUSES", "IdSwitch", "id_switch_causes", "switch_cause_counts"]
@@ -75,7 +77,8 @@ def _extend(span: dict[int, list[int]], tid: int, lo: int, hi: int) -> None:
 
 
 def id_switch_causes(matches: FrameMatches, tracks: Iterable[TrackState | Track], *, exchange_s: float = 3.0,
-                     new_s: float = 2.0, ended_s: float = 0.5, shared_s: float = 1.0) -> list[IdSwitch]:
+                     new_s: float = 2.0, ended_s: float = 0.5, shared_s: float = 1.0, shared_m: float = 1.0,
+                     truth: Sequence[GroundTruth] | None = None) -> list[IdSwitch]:
     """Every CLEAR identity switch of a run, with its cause (module docstring), in time order.
 
     Parameters
@@ -86,8 +89,14 @@ def id_switch_causes(matches: FrameMatches, tracks: Iterable[TrackState | Track]
         The tracks those matches were made from: their first and last times.
     exchange_s, new_s, ended_s, shared_s : float
         The windows of the rules, s.
+    shared_m : float
+        How far apart two people walking together (``shared``) may be, m (with ``truth``).
+    truth : sequence of GroundTruth, optional
+        The ground truth the matches were made from; without it ``shared`` asks for a match of the other person to
+        the shared track instead of the two people's distance.
     """
-    for name, v in (("exchange_s", exchange_s), ("new_s", new_s), ("ended_s", ended_s), ("shared_s", shared_s)):
+    for name, v in (("exchange_s", exchange_s), ("new_s", new_s), ("ended_s", ended_s), ("shared_s", shared_s),
+                    ("shared_m", shared_m)):
         if not v >= 0:
             raise ValueError(f"{name}: expected a value >= 0, got {v!r}")
     life = _lifetimes(tracks)
@@ -106,6 +115,7 @@ def id_switch_causes(matches: FrameMatches, tracks: Iterable[TrackState | Track]
         by_pair.setdefault((a, b), []).append((t, g))
     ex_ns, new_ns, end_ns = round(exchange_s * 1e9), round(new_s * 1e9), round(ended_s * 1e9)
     shared_ns = round(shared_s * 1e9)
+    near = None if truth is None else _Together(truth, shared_m)
     out = []
     for t, g, a, b, t_last in raw:
         if any(g2 != g and abs(t2 - t) <= ex_ns for t2, g2 in by_pair.get((b, a), ())):  # (another person: one
@@ -115,26 +125,53 @@ def id_switch_causes(matches: FrameMatches, tracks: Iterable[TrackState | Track]
             if a in life and life[a][1] <= t + end_ns:
                 cause = "reborn"
             else:
-                cause = "shared" if _shared(matches, by_person, t, t_last, g, a, shared_ns) else "new_track"
+                cause = "shared" if _shared(matches, by_person, t, t_last, g, a, shared_ns, near) else "new_track"
         else:
             cause = "takeover"
         out.append(IdSwitch(t, g, a, b, t_last, cause))
     return out
 
 
+class _Together:
+    """Whether two people were both present and within ``max_m`` of each other at every truth frame of a window."""
+
+    def __init__(self, truth: Sequence[GroundTruth], max_m: float) -> None:
+        self.t = np.array([g.t_ns for g in truth], np.int64)
+        self.frames = truth
+        self.max_m = max_m
+
+    def __call__(self, g: int, o: int, lo: int, hi: int) -> bool:
+        ks = range(int(np.searchsorted(self.t, lo)), int(np.searchsorted(self.t, hi)))  # frames in [lo, hi)
+        if not len(ks):
+            return False
+        for k in ks:
+            ids = self.frames[k].ids
+            i, j = np.flatnonzero(ids == g), np.flatnonzero(ids == o)
+            if not (i.size and j.size):
+                return False
+            p = self.frames[k].positions_m
+            if not np.hypot(*(p[i[0]] - p[j[0]])) <= self.max_m:
+                return False
+        return True
+
+
 def _shared(matches: FrameMatches, by_person: Mapping[int, list[tuple[int, int]]], t: int, t_last: int, g: int,
-            a: int, window_ns: int) -> bool:
-    """Whether track ``a``, which person ``g`` matched last at ``t_last`` and left for another track at ``t``, is
-    matched after ``t_last`` and up to ``window_ns`` after ``t`` to another person who, over the ``window_ns`` before
-    ``t``, was matched to no track but ``a`` (module docstring)."""
+            a: int, window_ns: int, together: _Together | None) -> bool:
+    """The ``shared`` rule (module docstring) for person ``g``, who matched track ``a`` last at ``t_last`` and
+    another track at ``t``."""
     times, gts = matches.by_track.get(a, (np.empty(0, np.int64), np.empty(0, np.int64)))
-    k = int(np.searchsorted(times, t_last, side="right"))
-    after = gts[k:int(np.searchsorted(times, t + window_ns, side="right"))]
+    lo = max(t_last, t - window_ns)
+    after = gts[int(np.searchsorted(times, lo, side="right")):int(np.searchsorted(times, t + window_ns, side="right"))]
     others = after[after != g]
     if not len(others):
         return False  # ``a`` went on with nobody (drifted onto nothing)
     o = int(others[0])
-    return all(tid == a for tt, tid in by_person.get(o, ()) if t - window_ns <= tt < t)
+    before = [tid for tt, tid in by_person.get(o, ()) if t - window_ns <= tt < t]
+    if any(tid != a for tid in before):
+        return False  # ``o`` had a track of its own
+    if together is None:
+        return bool(before)
+    return together(g, o, t - window_ns, t)
 
 
 def switch_cause_counts(switches: Iterable[IdSwitch] | Iterable[Mapping[str, int]]) -> dict[str, int]:
