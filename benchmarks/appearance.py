@@ -23,9 +23,10 @@ through the camera corrected by the horizontal bias learnt first (:func:`fusiont
 seed 000): how much the classifiers, hence identity checks and score maps, owe to the bias correction.
 
 The same on a real video (:func:`fusiontrack.eval.appearance.neighbour_evidence`): PETS 2009 S2.L1 (480 x 360, people
-about 20 x 45 px) with MOTChallenge 2015's public detections, identities from unambiguous box continuity, neighbours
-within 1.5 box heights; and the identity checks' verdicts (mean of a pair's first 3 scores beyond +-0.6) had each pair
-been checked.
+about 23 x 51 px) with MOTChallenge 2015's public detections, identities from unambiguous box continuity, neighbours
+within 1.5 box heights; and the verdicts identity checks would have given the pairs seen on 3 frames or more
+(:meth:`~fusiontrack.eval.appearance.NeighbourEvidence.verdicts`: both classifiers' mean evidence, decided when its
+running mean passes +-0.6).
 
     .venv/bin/python benchmarks/appearance.py [--repeats 3] [--frames 20] [--banks 5] [--crowd-seeds 0 1]
 """

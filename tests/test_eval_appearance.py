@@ -9,7 +9,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from fusiontrack.eval.appearance import iou_tracklets, neighbour_evidence
+from fusiontrack.eval.appearance import NeighbourEvidence, iou_tracklets, neighbour_evidence
 from fusiontrack.io.tracks import read_mot
 from fusiontrack.io.video import VideoReader
 
@@ -58,9 +58,10 @@ def test_bad_tracklet_settings_are_refused():
 
 
 def test_the_classifiers_tell_real_pedestrians_from_their_neighbours(shared_data):
-    """PETS09 S2.L1 (480 x 360, people about 20 x 45 px): over 795 frames, test then train as the fused tracker
-    learns. Each classifier scores its own person above a neighbour far more often than chance (1 in 2), and an
-    identity check asked after three images would have exchanged hardly any pair that was never exchanged."""
+    """PETS09 S2.L1 (480 x 360, people about 23 x 51 px): over 795 frames, test then train as the fused tracker
+    learns. Each classifier scores its own person above a neighbour far more often than chance (1 in 2), and the
+    identity checks, had they been asked, would have exchanged hardly any of the pairs they decided on (none was
+    ever exchanged: the identities are the tracklets')."""
     folder = shared_data / "video" / "pets09_s2l1"
     det = read_mot(folder / "PETS09-S2L1_det_MOT15.txt").scaled(0.625)  # (768 x 576 -> 480 x 360)
 
@@ -74,6 +75,59 @@ def test_the_classifiers_tell_real_pedestrians_from_their_neighbours(shared_data
     assert ne.right_sign() > 0.8
     v = ne.verdicts(n=3, margin=0.6)
     decided = v["keep"] + v["exchange"]
-    assert decided > 30
+    assert decided >= 20
     assert v["exchange"] <= 0.05 * decided
     assert np.all(np.abs(ne.evidence) <= 2.0)
+
+
+def test_tracklets_start_afresh_after_an_empty_frame_a_weak_link_or_a_split():
+    a = _walk(0.0, 4.0, 6)
+    # frames 1-2 linked; nothing in frame 3; frame 4 a new tracklet; frame 5 moved 15 px (IoU 0.14 < 0.3): new again
+    frame = np.array([1, 2, 4, 5])
+    boxes = np.array([a[1], a[2], a[4], a[4] + [15.0, 0, 15.0, 0]])
+    assert iou_tracklets(frame, boxes).tolist() == [0, 0, 1, 2]
+    assert iou_tracklets(frame, boxes, min_iou=0.1).tolist() == [0, 0, 1, 1]
+    # one box followed by two overlapping it alike (a group coming apart): neither continues it
+    two = np.array([a[0], a[0] + [-3.0, 0, -3.0, 0], a[0] + [3.0, 0, 3.0, 0]])
+    assert iou_tracklets(np.array([1, 2, 2]), two).tolist() == [0, 1, 2]
+    assert iou_tracklets(np.zeros(0), np.zeros((0, 4))).size == 0
+    with pytest.raises(ValueError, match="whole frame numbers"):
+        iou_tracklets(np.array([1.5]), np.zeros((1, 4)))
+
+
+def test_tracklets_on_annotated_boxes_seldom_hold_two_people(shared_data):
+    """On MOTChallenge ground truth (the identities annotated by hand), tracklets built from the boxes alone: none
+    holds two people on TUD-Campus and TUD-Stadtmitte, and at most 1 % do on MOT17-05 and MOT17-11, where small
+    people walk one behind the other faster than half a box per frame."""
+    ref = shared_data / "mot_reference"
+    for path, most in ((ref / "motmetrics_tud/TUD-Campus/gt.txt", 0.0),
+                       (ref / "motmetrics_tud/TUD-Stadtmitte/gt.txt", 0.0),
+                       (ref / "trackeval_mot17/gt/mot_challenge/MOT17-train/MOT17-05-FRCNN/gt/gt.txt", 0.01),
+                       (ref / "trackeval_mot17/gt/mot_challenge/MOT17-train/MOT17-11-FRCNN/gt/gt.txt", 0.01)):
+        gt = read_mot(path)
+        keep = (gt.conf > 0) & (gt.extra[:, 0] == 1) if "MOT17" in str(path) else np.ones(len(gt), bool)  # people
+        ids = iou_tracklets(gt.frame[keep], gt.boxes_xyxy[keep])
+        person = gt.id[keep]
+        two = sum(np.unique(person[ids == t]).size > 1 for t in np.unique(ids))
+        assert two <= most * np.unique(ids).size, path.parent.name
+        assert np.unique(ids).size >= np.unique(person).size  # (paths are cut, never fewer pieces than people)
+
+
+def test_verdicts_pair_the_two_classifiers_and_decide_at_the_first_sure_frame():
+    # pair (1, 2): both classifiers score frames 3, 6, 9; pair (1, 3): one classifier, evidence turning negative;
+    # pair (2, 3) scored on 2 frames only (no verdict); rows shuffled
+    rows = [(3, 1, 2, 0.2), (3, 2, 1, 0.6), (6, 1, 2, 0.9), (6, 2, 1, 0.9), (9, 1, 2, -1.0), (9, 2, 1, -1.0),
+            (3, 3, 1, -0.5), (6, 3, 1, -0.5), (9, 3, 1, -0.9), (12, 3, 1, -0.9),
+            (3, 2, 3, 1.0), (6, 2, 3, 1.0)]
+    order = np.random.default_rng(1).permutation(len(rows))
+    f, t, o, e = (np.array([rows[k][j] for k in order]) for j in range(4))
+    ne = NeighbourEvidence(e.astype(float), f.astype(np.int64), t.astype(np.int64), o.astype(np.int64))
+    # per frame: (1, 2) 0.4, 0.9, -1.0 (running 0.4, 0.65, 0.1); (1, 3) -0.5, -0.5, -0.9, -0.9 (running -0.5, -0.5,
+    # -0.633, -0.7); (2, 3) 1.0, 1.0
+    assert ne.verdicts(n=2, margin=0.6) == {"keep": 2, "exchange": 1, "undecided": 0}
+    # n = 3: (1, 2) is at 0.1 by its 3rd frame, (2, 3) has no 3rd frame (no verdict)
+    assert ne.verdicts(n=3, margin=0.6) == {"keep": 0, "exchange": 1, "undecided": 1}
+    assert ne.verdicts(n=1, margin=0.95) == {"keep": 1, "exchange": 0, "undecided": 2}
+    assert ne.right_sign() == pytest.approx(0.5)
+    with pytest.raises(ValueError, match="n:"):
+        ne.verdicts(n=0)
