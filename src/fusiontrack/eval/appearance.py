@@ -41,8 +41,8 @@ def iou_tracklets(frame: np.ndarray, boxes_xyxy: np.ndarray, *, min_iou: float =
                   ) -> np.ndarray:
     """Tracklet ids ``(n,) int64`` of detections (rows in any order) linked only where the link is unambiguous.
 
-    A detection of frame ``f`` continues the tracklet of a detection of frame ``f - 1`` when each is the other's
-    best overlap (IoU), that IoU is at least ``min_iou``, and each one's second best is below ``ratio`` times it;
+    A detection of frame ``f`` continues the tracklet of a detection of frame ``f - 1`` when their overlap (IoU) is
+    at least ``min_iou`` and each one's second best is below ``ratio`` times it (so each is the other's best);
     otherwise it starts a tracklet (after a frame without detections, every detection does). Ids are numbered from
     0 in order of appearance.
     """
@@ -69,7 +69,7 @@ def iou_tracklets(frame: np.ndarray, boxes_xyxy: np.ndarray, *, min_iou: float =
         f = int(frame[rows[0]])
         if prev_frame == f - 1 and len(prev_rows):
             iou = box_iou(boxes[prev_rows], boxes[rows])  # (previous, current)
-            best_prev, best_cur = iou.argmax(axis=0), iou.argmax(axis=1)
+            best_prev = iou.argmax(axis=0)
             top = np.sort(iou, axis=0)[::-1]
             second_cur = top[1] if len(prev_rows) > 1 else np.zeros(len(rows))
             side = np.sort(iou, axis=1)[:, ::-1]
@@ -77,8 +77,8 @@ def iou_tracklets(frame: np.ndarray, boxes_xyxy: np.ndarray, *, min_iou: float =
             for j in range(len(rows)):
                 i = best_prev[j]
                 v = iou[i, j]
-                if (v >= min_iou and best_cur[i] == j and second_cur[j] < ratio * v
-                        and second_prev[i] < ratio * v):
+                # (with ``ratio`` <= 1, ``i``'s second best below ``ratio * v`` makes ``j`` its best)
+                if v >= min_iou and second_cur[j] < ratio * v and second_prev[i] < ratio * v:
                     out[rows[j]] = out[prev_rows[i]]
         for r in rows:
             if out[r] < 0:
