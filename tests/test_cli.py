@@ -480,3 +480,35 @@ def test_track_people_writes_the_bias_and_the_overlay(tmp_path):
     # measured 0.55 (IDF1 0.77): B11's box of a 1.70 m person, 0.4 as wide as tall, is not the simulator's drawn
     # person, so some matches fall below IoU 0.5; tracks without boxes score 0
     assert image["metrics"]["mota"] > 0.3
+
+
+def test_appearance_reports_what_the_classifiers_do_on_a_video(shared_data, tmp_path):
+    """`appearance` on PETS09 (its first 200 frames): the figures it writes are those of
+    fusiontrack.eval.appearance on the same frames and boxes; boxes at another resolution, or no detection file,
+    are refused with a message naming the option."""
+    from fusiontrack.eval.appearance import neighbour_evidence
+    from fusiontrack.io.tracks import read_mot
+    from fusiontrack.io.video import VideoReader
+
+    folder = shared_data / "video/pets09_s2l1"
+    video, det_file = folder / "vtest_pets09_s2l1_480x360.avi", folder / "PETS09-S2L1_det_MOT15.txt"
+    out = tmp_path / "a.json"
+    run("appearance", str(video), "--detections", str(det_file), "--detection-scale", "0.625", "--max-frames", "200",
+        "-o", str(out))
+    got = json.loads(out.read_text())
+    det = read_mot(det_file).scaled(0.625)
+    with VideoReader(video, "camera", fps=7.0) as reader:
+        frames = [(k, img.pixels) for k, img in zip(range(1, 201), reader, strict=False)]
+    ne = neighbour_evidence(frames, det)
+    assert got["scores"] == ne.evidence.size > 0
+    assert got["right_sign"] == pytest.approx(ne.right_sign())
+    assert got["verdicts"] == ne.verdicts()
+    bad = subprocess.run([sys.executable, "-m", "fusiontrack", "appearance", str(video), "--detections",
+                          str(det_file)], capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 2
+    assert "--detection-scale" in bad.stderr
+    missing = subprocess.run([sys.executable, "-m", "fusiontrack", "appearance", str(video), "--detections",
+                              str(tmp_path / "none.txt")], capture_output=True, text=True, timeout=300)
+    assert missing.returncode == 2
+    assert "--detections" in missing.stderr
+    assert "no such file" in missing.stderr

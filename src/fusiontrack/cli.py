@@ -1183,6 +1183,93 @@ def _read_truth(path: Path, topic: str | None, time_source: str) -> tuple[list[A
     return frames, topic
 
 
+@app.command()
+def appearance(
+    video: Annotated[Path, typer.Argument(help="A video file (mp4, avi, ...).")],
+    detections: Annotated[Path, typer.Option(help="Person boxes in it: MOTChallenge rows "
+                                             "frame,-1,left,top,width,height,conf,... (frames from 1).")],
+    detection_scale: Annotated[float, typer.Option(help="Multiply the boxes by this (e.g. 0.625 for 768x576 boxes "
+                                                   "on a 480x360 video).")] = 1.0,
+    min_score: Annotated[float | None, typer.Option(help="Drop detections with a lower conf.")] = None,
+    max_frames: Annotated[int | None, typer.Option(help="Only the first N frames.")] = None,
+    output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the figures as JSON here.")] = None,
+) -> None:
+    """How well seed 001's per-person classifiers tell the people of a video apart: before trusting the fused
+    pipeline's identity checks with this camera.
+
+    The classifiers learn and are tested as the fused tracker uses them (test then train: a person learns while
+    somebody is near, with them as negatives, and scores its own box against its neighbours'), with identities
+    from unambiguous box continuity, so no annotation is needed (fusiontrack.eval.appearance). Prints the share
+    of scores the right way round, the evidence, and the verdicts identity checks would have given.
+    """
+    import dataclasses
+
+    import numpy as np
+
+    from .eval.appearance import iou_tracklets, neighbour_evidence
+    from .io.tracks import read_mot
+    from .io.video import VideoReader
+    from .vision.people import _check_detections
+
+    if not detections.is_file():
+        raise RecordingError(f"--detections {detections}: no such file (expected MOTChallenge rows "
+                             "frame,-1,left,top,width,height,conf,...)")
+    if not (math.isfinite(detection_scale) and detection_scale > 0):
+        raise ConfigError(f"--detection-scale: expected a number > 0, got {detection_scale!r}")
+    if max_frames is not None and max_frames < 1:
+        raise ConfigError(f"--max-frames: expected a count >= 1, got {max_frames!r}")
+    det = read_mot(detections).scaled(detection_scale)
+    if min_score is not None:
+        keep = det.conf >= min_score
+        det = dataclasses.replace(det, frame=det.frame[keep], id=det.id[keep], boxes_ltwh=det.boxes_ltwh[keep],
+                                  conf=det.conf[keep], extra=det.extra[keep])
+    reader = VideoReader(video, "camera", fps=1.0)  # (times are not used: frames are counted)
+    with reader:
+        _check_detections(det, reader.width, reader.height, video)
+        with progress() as bar:
+            total = reader.frame_count if max_frames is None else min(max_frames, reader.frame_count or max_frames)
+            task = bar.add_task("classifiers (test then train)", total=total or None)
+
+            def frames():
+                for k, img in enumerate(reader, start=1):
+                    if max_frames is not None and k > max_frames:
+                        return
+                    bar.update(task, completed=k)
+                    yield k, img.pixels
+
+            ne = neighbour_evidence(frames(), det)
+    e = ne.evidence
+    v = ne.verdicts()
+    n_tracklets = int(np.unique(iou_tracklets(det.frame, det.boxes_xyxy)).size) if len(det) else 0
+    result = {"video": str(video), "detections": str(detections), "tracklets": n_tracklets,
+              "scores": int(e.size), "right_sign": ne.right_sign(),
+              "mean_evidence": float(e.mean()) if e.size else math.nan,
+              "evidence_p10": float(np.percentile(e, 10)) if e.size else math.nan,
+              "evidence_over_0_6": float(np.mean(e > 0.6)) if e.size else math.nan, "verdicts": v}
+    table = Table(title=f"seed 001's classifiers on {video.name} (neighbours, test then train)", header_style="bold")
+    table.add_column("figure")
+    table.add_column("value", justify="right")
+    for label, value in (("tracklets (identities from box continuity)", str(n_tracklets)),
+                         ("scores (a person's classifier on its box and a neighbour's)", str(e.size)),
+                         ("right way round (own box higher)", f"{result['right_sign']:.1%}"),
+                         ("mean evidence (own - neighbour, in [-2, 2])", f"{result['mean_evidence']:.2f}"),
+                         ("10th percentile of the evidence", f"{result['evidence_p10']:.2f}"),
+                         ("evidence > 0.6", f"{result['evidence_over_0_6']:.1%}"),
+                         ("identity checks: kept (right)", str(v["keep"])),
+                         ("identity checks: exchanged (wrong)", str(v["exchange"])),
+                         ("identity checks: undecided", str(v["undecided"]))):
+        table.add_row(label, value)
+    console.print(table)
+    if not e.size:
+        console.print("[yellow]no person was ever scored against a neighbour: the video shows nobody near anybody "
+                      "(or the detections miss them)[/yellow]")
+    if output is not None:
+        output.parent.mkdir(parents=True, exist_ok=True)
+        finite = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in result.items()}
+        output.write_text(json.dumps(finite, indent=2) + "\n")
+        console.print(f"figures: {output}")
+
+
 @app.command(name="eval")
 def eval_(
     tracks: Annotated[Path, typer.Argument(help="tracks.csv / tracks.jsonl (or the folder of `fusiontrack track`),"
