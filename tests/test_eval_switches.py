@@ -135,6 +135,49 @@ def test_a_track_that_drifts_far_or_onto_a_newcomer_is_no_shared_track():
         assert [(s.gt_id, s.from_track, s.to_track, s.cause) for s in switches] == [(1, 1, 2, "new_track")], story
 
 
+def test_shared_looks_for_the_other_person_near_the_switch_only():
+    """Track 1 covers persons 1 and 2 walking side by side (matched to person 1), follows person 2 alone from frame
+    30 to 35 while person 1 goes unmatched, then drifts off onto nobody; the new track 2 takes person 1 at frame 50.
+    Track 1 was with person 2 1.5 to 2 s before the switch: shared with ``shared_s`` 2.5, not with 1 (the truth
+    given in any order)."""
+    xy = _side_by_side()
+    gt = _truth(xy)
+    st = []
+    for k in range(N):
+        st.append(_state(k, 1, xy[k, 0] + [0.0, 0.25] if k < 30 else xy[k, 1] if k < 36 else [50.0, 50.0 + k]))
+        if k >= 50:
+            st.append(_state(k, 2, xy[k, 0]))
+    shuffled = [gt[k] for k in np.random.default_rng(2).permutation(len(gt))]
+    assert _causes(xy, st, truth=shuffled, shared_s=2.5) == [(1, 1, 2, "shared")]
+    assert _causes(xy, st, truth=shuffled, shared_s=1.0) == [(1, 1, 2, "new_track")]
+
+
+def test_an_exchange_needs_both_directions_within_the_window():
+    # track 1 takes person 2 at frame 30 (3 s); track 2, off on nobody meanwhile, takes person 1 at frame 80 (8 s)
+    xy = _people(2)
+    far = np.array([50.0, 50.0])
+    st = []
+    for k in range(N):
+        st.append(_state(k, 1, xy[k, 0] if k < 30 else xy[k, 1]))
+        st.append(_state(k, 2, xy[k, 1] if k < 30 else far if k < 80 else xy[k, 0]))
+    m = frame_matches(_truth(xy), st, 0.5)
+    assert [(s.gt_id, s.cause) for s in id_switch_causes(m, st)] == [(2, "takeover"), (1, "takeover")]
+    assert [s.cause for s in id_switch_causes(m, st, exchange_s=5.0)] == ["exchange", "exchange"]
+
+
+def test_a_person_taken_and_given_back_is_no_exchange():
+    # track 2, alive far off from the start, takes person 1 for 3 frames; track 1 takes it back: one person, no
+    # exchange between two (review: both switches were labelled exchange)
+    xy = _people(1)
+    far = np.array([50.0, 50.0])
+    st = []
+    for k in range(N):
+        st.append(_state(k, 1, xy[k, 0] if not 40 <= k < 43 else far))
+        st.append(_state(k, 2, xy[k, 0] if 40 <= k < 43 else far + np.array([k, 0.0])))
+    switches = id_switch_causes(frame_matches(_truth(xy), st, 0.5), st)
+    assert [(s.from_track, s.to_track, s.cause) for s in switches] == [(1, 2, "takeover"), (2, 1, "takeover")]
+
+
 @pytest.mark.parametrize("seed", range(5))
 def test_the_causes_add_up_to_trackeval_id_switches(seed):
     """Random relabelings of a crowd's tracks (exchanges, new ids, ids reused, dropped frames): however the

@@ -14,11 +14,11 @@ A switch of person ``g`` from track ``a`` to track ``b`` at ``t`` (``g`` matched
   exchanged their people (each such pair counts two switches, as CLEAR counts them);
 * ``reborn`` — else, ``b`` began within ``new_s`` before ``t`` and ``a`` ended by ``t + ended_s``: the person's
   track was lost and a new one started (re-identification's case);
-* ``shared`` — else, ``b`` began within ``new_s`` before ``t`` while ``a`` goes on, ``a`` is matched to another
-  person ``o`` within ``shared_s`` of ``t`` (before or after; after ``g`` left it), ``o`` was matched to no track
-  but ``a`` over the ``shared_s`` before ``t``, and the two people walked together then: with the ground truth, both
-  present and at most ``shared_m`` apart throughout; without it, ``o`` matched to ``a`` at least once. ``a`` had
-  been following two people as one (two people walking side by side, whom the detector saw as one), and when they
+* ``shared`` — else, ``b`` began within ``new_s`` before ``t`` while ``a`` goes on, and ``a`` is matched, within
+  ``shared_s`` of ``t`` (before or after, and after ``g`` left it), to some other person ``o`` who was matched to no
+  track but ``a`` over the ``shared_s`` before ``t`` and walked with ``g`` then: with the ground truth, both present
+  and at most ``shared_m`` apart throughout; without it, ``o`` matched to ``a`` at least once. ``a`` had been
+  following two people as one (two people walking side by side, whom the detector saw as one), and when they
   parted the new track took this one. The person had no track of its own to keep: no appearance at a meeting can
   give one back, better detection (seeing the two as two) can;
 * ``new_track`` — else, ``b`` began within ``new_s`` before ``t`` while ``a`` goes on: a new track took the person
@@ -136,8 +136,10 @@ class _Together:
     """Whether two people were both present and within ``max_m`` of each other at every truth frame of a window."""
 
     def __init__(self, truth: Sequence[GroundTruth], max_m: float) -> None:
-        self.t = np.array([g.t_ns for g in truth], np.int64)
-        self.frames = truth
+        t = np.array([g.t_ns for g in truth], np.int64)
+        order = np.argsort(t, kind="stable")  # (frame_matches takes the truth in any order)
+        self.t = t[order]
+        self.frames = [truth[k] for k in order]
         self.max_m = max_m
 
     def __call__(self, g: int, o: int, lo: int, hi: int) -> bool:
@@ -162,16 +164,15 @@ def _shared(matches: FrameMatches, by_person: Mapping[int, list[tuple[int, int]]
     times, gts = matches.by_track.get(a, (np.empty(0, np.int64), np.empty(0, np.int64)))
     lo = max(t_last, t - window_ns)
     after = gts[int(np.searchsorted(times, lo, side="right")):int(np.searchsorted(times, t + window_ns, side="right"))]
-    others = after[after != g]
-    if not len(others):
-        return False  # ``a`` went on with nobody (drifted onto nothing)
-    o = int(others[0])
-    before = [tid for tt, tid in by_person.get(o, ()) if t - window_ns <= tt < t]
-    if any(tid != a for tid in before):
-        return False  # ``o`` had a track of its own
-    if together is None:
-        return bool(before)
-    return together(g, o, t - window_ns, t)
+    # the other people ``a`` went on with, in order: the first who walked with ``g`` (a passer-by ``a`` touched on
+    # its way does not hide them)
+    for o in dict.fromkeys(int(x) for x in after[after != g]):
+        before = [tid for tt, tid in by_person.get(o, ()) if t - window_ns <= tt < t]
+        if any(tid != a for tid in before):
+            continue  # ``o`` had a track of its own
+        if together(g, o, t - window_ns, t) if together is not None else bool(before):
+            return True
+    return False  # ``a`` went on with nobody, or with people who did not share it
 
 
 def switch_cause_counts(switches: Iterable[IdSwitch] | Iterable[Mapping[str, int]]) -> dict[str, int]:
