@@ -503,6 +503,13 @@ def test_appearance_reports_what_the_classifiers_do_on_a_video(shared_data, tmp_
     assert got["scores"] == ne.evidence.size > 0
     assert got["right_sign"] == pytest.approx(ne.right_sign())
     assert got["verdicts"] == ne.verdicts()
+    assert (got["frames"], got["tracklets"], got["detections_read"]) == (200, ne.tracklets, ne.detections)
+    assert got["detections_read"] == np.count_nonzero(det.frame <= 200)
+    high = subprocess.run([sys.executable, "-m", "fusiontrack", "appearance", str(video), "--detections",
+                           str(det_file), "--detection-scale", "0.625", "--min-score", "2"], capture_output=True,
+                          text=True, timeout=300)
+    assert high.returncode == 2
+    assert "--min-score 2: above every detection's score" in high.stderr
     bad = subprocess.run([sys.executable, "-m", "fusiontrack", "appearance", str(video), "--detections",
                           str(det_file)], capture_output=True, text=True, timeout=300)
     assert bad.returncode == 2

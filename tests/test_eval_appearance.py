@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from fusiontrack.eval.appearance import NeighbourEvidence, iou_tracklets, neighbour_evidence
-from fusiontrack.io.tracks import read_mot
+from fusiontrack.io.tracks import MotBoxes, read_mot
 from fusiontrack.io.video import VideoReader
 
 
@@ -90,9 +90,13 @@ def test_tracklets_start_afresh_after_an_empty_frame_a_weak_link_or_a_split():
     # one box followed by two overlapping it alike (a group coming apart): neither continues it
     two = np.array([a[0], a[0] + [-3.0, 0, -3.0, 0], a[0] + [3.0, 0, 3.0, 0]])
     assert iou_tracklets(np.array([1, 2, 2]), two).tolist() == [0, 1, 2]
+    # two boxes coming together into one (a group forming): it continues neither
+    assert iou_tracklets(np.array([1, 1, 2]), two[[1, 2, 0]]).tolist() == [0, 1, 2]
     assert iou_tracklets(np.zeros(0), np.zeros((0, 4))).size == 0
-    with pytest.raises(ValueError, match="whole frame numbers"):
-        iou_tracklets(np.array([1.5]), np.zeros((1, 4)))
+    with pytest.raises(ValueError, match=r"whole frame numbers, got 1\.5"):
+        iou_tracklets(np.array([1.0, 1.5]), np.zeros((2, 4)))
+    with pytest.raises(ValueError, match="expected numbers"):
+        iou_tracklets(np.array(["a"]), np.zeros((1, 4)))
 
 
 def test_tracklets_on_annotated_boxes_seldom_hold_two_people(shared_data):
@@ -131,3 +135,26 @@ def test_verdicts_pair_the_two_classifiers_and_decide_at_the_first_sure_frame():
     assert ne.right_sign() == pytest.approx(0.5)
     with pytest.raises(ValueError, match="n:"):
         ne.verdicts(n=0)
+
+
+@pytest.mark.parametrize(("per_frame", "verdict"), [([-0.5, 1.5, 1.5], "keep"),  # wrong at first, sure at the 3rd
+                                                    ([1.0, 1.0, 1.0, -5.0, -5.0], "keep"),  # decided before it turns
+                                                    ([-1.0, 1.0, 0.0], "undecided")])  # (mean 0, margin 0)
+def test_a_verdict_is_taken_at_the_first_sure_frame_from_the_nth_on(per_frame, verdict):
+    k = len(per_frame)
+    ne = NeighbourEvidence(np.array(per_frame, float), np.arange(k, dtype=np.int64), np.ones(k, np.int64),
+                           np.full(k, 2, np.int64))
+    margin = 0.0 if verdict == "undecided" else 0.6
+    assert ne.verdicts(n=3, margin=margin) == {"keep": 0, "exchange": 0, "undecided": 0, verdict: 1}
+
+
+def test_empty_boxes_are_left_out_and_counted():
+    # two people side by side over 8 frames of a grey image; one detection of frame 3 is an empty box
+    boxes = [[10.0, 10.0, 30.0, 60.0], [40.0, 10.0, 60.0, 60.0]]
+    rows = [(f, b) for f in range(1, 9) for b in boxes] + [(3, [70.0, 10.0, 70.0, 60.0])]
+    det = MotBoxes(np.array([f for f, _ in rows], np.int64), np.full(len(rows), -1, np.int64),
+                   np.array([[b[0], b[1], b[2] - b[0], b[3] - b[1]] for _, b in rows]), np.ones(len(rows)),
+                   np.zeros((len(rows), 0)))
+    img = np.full((80, 100, 3), 128, np.uint8)
+    ne = neighbour_evidence(((f, img) for f in range(1, 9)), det)
+    assert (ne.frames, ne.detections, ne.dropped, ne.tracklets) == (8, 17, 1, 2)

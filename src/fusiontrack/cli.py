@@ -1206,7 +1206,7 @@ def appearance(
 
     import numpy as np
 
-    from .eval.appearance import iou_tracklets, neighbour_evidence
+    from .eval.appearance import neighbour_evidence
     from .io.tracks import read_mot
     from .io.video import VideoReader
     from .vision.people import _check_detections
@@ -1217,10 +1217,15 @@ def appearance(
     if not (math.isfinite(detection_scale) and detection_scale > 0):
         raise ConfigError(f"--detection-scale: expected a number > 0, got {detection_scale!r}")
     if max_frames is not None and max_frames < 1:
-        raise ConfigError(f"--max-frames: expected a count >= 1, got {max_frames!r}")
+        raise ConfigError(f"--max-frames: expected a number of frames >= 1, got {max_frames!r}")
+    if min_score is not None and not math.isfinite(min_score):
+        raise ConfigError(f"--min-score: expected a finite detection score, got {min_score}")
     det = read_mot(detections).scaled(detection_scale)
     if min_score is not None:
         keep = det.conf >= min_score
+        if not keep.any():
+            raise ConfigError(f"--min-score {min_score:g}: above every detection's score in {detections} "
+                              f"({det.conf.min():g} to {det.conf.max():g})")
         det = dataclasses.replace(det, frame=det.frame[keep], id=det.id[keep], boxes_ltwh=det.boxes_ltwh[keep],
                                   conf=det.conf[keep], extra=det.extra[keep])
     reader = VideoReader(video, "camera", fps=1.0)  # (times are not used: frames are counted)
@@ -1240,29 +1245,40 @@ def appearance(
             ne = neighbour_evidence(frames(), det)
     e = ne.evidence
     v = ne.verdicts()
-    n_tracklets = int(np.unique(iou_tracklets(det.frame, det.boxes_xyxy)).size) if len(det) else 0
-    result = {"video": str(video), "detections": str(detections), "tracklets": n_tracklets,
+    result = {"video": str(video), "detections": str(detections), "detection_scale": detection_scale,
+              "min_score": min_score, "max_frames": max_frames, "frames": ne.frames,
+              "detections_read": ne.detections, "empty_boxes": ne.dropped, "tracklets": ne.tracklets,
               "scores": int(e.size), "right_sign": ne.right_sign(),
               "mean_evidence": float(e.mean()) if e.size else math.nan,
               "evidence_p10": float(np.percentile(e, 10)) if e.size else math.nan,
               "evidence_over_0_6": float(np.mean(e > 0.6)) if e.size else math.nan, "verdicts": v}
+
+    def shown(x: float, fmt: str) -> str:
+        return format(x, fmt) if math.isfinite(x) else "-"
+
     table = Table(title=f"seed 001's classifiers on {video.name} (neighbours, test then train)", header_style="bold")
     table.add_column("figure")
     table.add_column("value", justify="right")
-    for label, value in (("tracklets (identities from box continuity)", str(n_tracklets)),
+    for label, value in (("frames read / detections in them", f"{ne.frames} / {ne.detections}"),
+                         ("tracklets (identities from box continuity)", str(ne.tracklets)),
                          ("scores (a person's classifier on its box and a neighbour's)", str(e.size)),
-                         ("right way round (own box higher)", f"{result['right_sign']:.1%}"),
-                         ("mean evidence (own - neighbour, in [-2, 2])", f"{result['mean_evidence']:.2f}"),
-                         ("10th percentile of the evidence", f"{result['evidence_p10']:.2f}"),
-                         ("evidence > 0.6", f"{result['evidence_over_0_6']:.1%}"),
+                         ("right way round (own box higher)", shown(result["right_sign"], ".1%")),
+                         ("mean evidence (own - neighbour, in [-2, 2])", shown(result["mean_evidence"], ".2f")),
+                         ("10th percentile of the evidence", shown(result["evidence_p10"], ".2f")),
+                         ("evidence > 0.6", shown(result["evidence_over_0_6"], ".1%")),
                          ("identity checks: kept (right)", str(v["keep"])),
                          ("identity checks: exchanged (wrong)", str(v["exchange"])),
                          ("identity checks: undecided", str(v["undecided"]))):
         table.add_row(label, value)
     console.print(table)
-    if not e.size:
-        console.print("[yellow]no person was ever scored against a neighbour: the video shows nobody near anybody "
-                      "(or the detections miss them)[/yellow]")
+    if ne.dropped:
+        console.print(f"[yellow]{ne.dropped} empty or non-finite boxes left out[/yellow]")
+    if not ne.detections:
+        console.print(f"[yellow]no detection of {detections} falls in the {ne.frames} frames read (frames are "
+                      "counted from 1)[/yellow]")
+    elif not e.size:
+        console.print("[yellow]no person was ever scored against a neighbour: nobody was near anybody long enough "
+                      "for a classifier to learn first (or the frames read are too few)[/yellow]")
     if output is not None:
         output.parent.mkdir(parents=True, exist_ok=True)
         finite = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in result.items()}

@@ -50,11 +50,17 @@ def iou_tracklets(frame: np.ndarray, boxes_xyxy: np.ndarray, *, min_iou: float =
         raise ValueError(f"min_iou: expected a value in (0, 1], got {min_iou!r}")
     if not 0 < ratio <= 1:
         raise ValueError(f"ratio: expected a value in (0, 1], got {ratio!r}")
-    raw = np.asarray(frame)
-    if raw.ndim != 1 or (raw.size and not np.array_equal(raw, np.round(raw))):
-        raise ValueError(f"frame: expected a 1-D array of whole frame numbers, got shape {raw.shape}")
+    try:
+        raw = np.asarray(frame, np.float64)
+        boxes = np.asarray(boxes_xyxy, np.float64).reshape(-1, 4)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"frame, boxes_xyxy: expected numbers ({err})") from None
+    if raw.ndim != 1:
+        raise ValueError(f"frame: expected a 1-D array of frame numbers, got shape {raw.shape}")
+    bad = ~(np.isfinite(raw) & (raw == np.round(raw)))
+    if bad.any():
+        raise ValueError(f"frame: expected whole frame numbers, got {float(raw[bad][0])!r} (row {int(np.argmax(bad))})")
     frame = raw.astype(np.int64)
-    boxes = np.asarray(boxes_xyxy, np.float64).reshape(-1, 4)
     if len(frame) != len(boxes):
         raise ValueError(f"frame and boxes_xyxy: expected as many rows, got {len(frame)} and {len(boxes)}")
     out = np.full(len(frame), -1, np.int64)
@@ -98,12 +104,20 @@ class NeighbourEvidence:
         Own box's confidence minus the neighbour's box's, by the target's classifier, in ``[-2, 2]``.
     frame, target, neighbour : (n,) int64
         The frame and the two tracklets.
+    frames, tracklets, detections : int
+        Frames read, tracklets in them and their detections (boxes given).
+    dropped : int
+        Detections in the frames read whose box was empty or not finite (left out).
     """
 
     evidence: np.ndarray
     frame: np.ndarray
     target: np.ndarray
     neighbour: np.ndarray
+    frames: int = 0
+    tracklets: int = 0
+    detections: int = 0
+    dropped: int = 0
 
     def right_sign(self) -> float:
         """The share of scores with evidence > 0 (NaN without scores)."""
@@ -113,10 +127,10 @@ class NeighbourEvidence:
         """The verdicts identity checks would give, one per pair of neighbours scored on at least ``n`` frames.
 
         Frame by frame, the mean evidence of the two classifiers that scored (each its own box against the other's);
-        from the ``n``-th frame on, the first time the running mean of those is beyond ``± margin``: ``keep``
-        (right) or ``exchange`` (wrong: the pair was never exchanged); else ``undecided``. (A check of the fused
-        tracker also waits for the pair's closest approach and is asked again at later contacts: this is its first
-        decision over the whole video.)"""
+        from the ``n``-th frame on, the first time the running mean of those is at least ``margin`` away from 0:
+        ``keep`` if above (right), ``exchange`` if below (wrong: the pair was never exchanged); else ``undecided``.
+        (A check of the fused tracker also waits for the pair's closest approach and is asked again at later
+        contacts: this is its first decision over the whole video.)"""
         if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
             raise ValueError(f"n: expected an integer >= 1, got {n!r}")
         if not margin >= 0:
@@ -138,7 +152,8 @@ class NeighbourEvidence:
             if not beyond.size:
                 out["undecided"] += 1
             else:
-                out["keep" if running[n - 1 + beyond[0]] > 0 else "exchange"] += 1
+                r = running[n - 1 + beyond[0]]
+                out["keep" if r > 0 else "exchange" if r < 0 else "undecided"] += 1
         return out
 
 
@@ -160,47 +175,65 @@ def neighbour_evidence(images: Iterable[tuple[int, np.ndarray]], detections: Mot
         :func:`iou_tracklets`).
     """
     boxes_all = detections.boxes_xyxy
-    ids_all = iou_tracklets(detections.frame, boxes_all, min_iou=min_iou)
+    size = boxes_all[:, 2:] - boxes_all[:, :2]
+    usable = np.isfinite(boxes_all).all(axis=1) & (size > 0).all(axis=1)  # (an empty box has no patch to learn)
+    ids_all = np.full(len(boxes_all), -1, np.int64)
+    ids_all[usable] = iou_tracklets(detections.frame[usable], boxes_all[usable], min_iou=min_iou)
+    last_frame: dict[int, int] = {}  # tracklet -> its last frame (its classifier is dropped after it)
+    for t, f in zip(ids_all[usable].tolist(), detections.frame[usable].tolist(), strict=True):
+        last_frame[t] = max(f, last_frame.get(t, f))
     bank = AppearanceBank(params or AppearanceParams(), rng=rng)
     last_train: dict[int, int] = {}
     ev: list[float] = []
     meta: list[tuple[int, int, int]] = []
-    live: set[int] = set()
+    seen: set[int] = set()
+    n_frames = n_det = n_dropped = 0
     for f, img in images:
+        n_frames += 1
         rows = detections.rows_at(int(f))
+        n_det += len(rows)
+        n_dropped += int(np.count_nonzero(~usable[rows]))
+        rows = rows[usable[rows]]
         b, ids = boxes_all[rows], ids_all[rows]
-        # a tracklet missing from a frame has ended (it never resumes): its classifier goes
-        ended = live.difference(ids.tolist())
+        seen.update(ids.tolist())
+        if len(rows) >= 2:
+            _test_and_train(int(f), img, b, ids, bank, last_train, ev, meta, near=near, max_overlap=max_overlap,
+                            test_every=test_every, train_every=train_every)
+        ended = [t for t in ids.tolist() if last_frame[t] <= int(f)]  # (a tracklet never resumes)
         if ended:
             bank.drop(ended)
             for t in ended:
                 last_train.pop(t, None)
-        live = set(ids.tolist())
-        if len(rows) < 2:
-            continue
-        bottom = np.column_stack([(b[:, 0] + b[:, 2]) / 2, b[:, 3]])
-        h = b[:, 3] - b[:, 1]
-        close = np.linalg.norm(bottom[:, None] - bottom[None], axis=2) < near * np.maximum(h[:, None], h[None])
-        np.fill_diagonal(close, False)
-        inside = box_containment(b, b)
-        np.fill_diagonal(inside, 0.0)
-        clear = inside.max(axis=1) <= max_overlap
-        if int(f) % test_every == 0:
-            for k in np.flatnonzero(clear):
-                tid = int(ids[k])
-                others = np.flatnonzero(close[k] & clear)
-                if not others.size or not bank.is_trained(tid):
-                    continue
-                sc = bank.box_scores(img, b[np.r_[k, others]], [tid])[:, 0]
-                for j, v in zip(others, sc[1:], strict=True):
-                    if np.isfinite(sc[0] - v):
-                        ev.append(float(sc[0] - v))
-                        meta.append((int(f), tid, int(ids[j])))
-        learners = [int(ids[k]) for k in np.flatnonzero(close.any(axis=1))
-                    if int(f) - last_train.get(int(ids[k]), -(1 << 30)) >= train_every]
-        if learners:
-            bank.train(img, {int(t): b[k] for k, t in enumerate(ids)}, train_ids=learners,
-                       force_update=any(not bank.is_trained(t) for t in learners))
-            last_train.update((t, int(f)) for t in learners)
     m = np.array(meta, np.int64).reshape(-1, 3)
-    return NeighbourEvidence(np.array(ev, np.float64), m[:, 0], m[:, 1], m[:, 2])
+    return NeighbourEvidence(np.array(ev, np.float64), m[:, 0], m[:, 1], m[:, 2], frames=n_frames,
+                             tracklets=len(seen), detections=n_det, dropped=n_dropped)
+
+
+def _test_and_train(f: int, img: np.ndarray, b: np.ndarray, ids: np.ndarray, bank: AppearanceBank,
+                last_train: dict[int, int], ev: list[float], meta: list[tuple[int, int, int]], *, near: float,
+                max_overlap: float, test_every: int, train_every: int) -> None:
+    """One frame of :func:`neighbour_evidence`: score (every ``test_every`` frames), then learn."""
+    bottom = np.column_stack([(b[:, 0] + b[:, 2]) / 2, b[:, 3]])
+    h = b[:, 3] - b[:, 1]
+    close = np.linalg.norm(bottom[:, None] - bottom[None], axis=2) < near * np.maximum(h[:, None], h[None])
+    np.fill_diagonal(close, False)
+    inside = box_containment(b, b)
+    np.fill_diagonal(inside, 0.0)
+    clear = inside.max(axis=1) <= max_overlap
+    if f % test_every == 0:
+        for k in np.flatnonzero(clear):
+            tid = int(ids[k])
+            others = np.flatnonzero(close[k] & clear)
+            if not others.size or not bank.is_trained(tid):
+                continue
+            sc = bank.box_scores(img, b[np.r_[k, others]], [tid])[:, 0]
+            for j, v in zip(others, sc[1:], strict=True):
+                if np.isfinite(sc[0] - v):
+                    ev.append(float(sc[0] - v))
+                    meta.append((f, tid, int(ids[j])))
+    learners = [int(ids[k]) for k in np.flatnonzero(close.any(axis=1))
+                if f - last_train.get(int(ids[k]), -(1 << 30)) >= train_every]
+    if learners:
+        bank.train(img, {int(t): b[k] for k, t in enumerate(ids)}, train_ids=learners,
+                   force_update=any(not bank.is_trained(t) for t in learners))
+        last_train.update((t, f) for t in learners)
