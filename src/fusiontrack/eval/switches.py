@@ -115,7 +115,7 @@ def id_switch_causes(matches: FrameMatches, tracks: Iterable[TrackState | Track]
         by_pair.setdefault((a, b), []).append((t, g))
     ex_ns, new_ns, end_ns = round(exchange_s * 1e9), round(new_s * 1e9), round(ended_s * 1e9)
     shared_ns = round(shared_s * 1e9)
-    near = None if truth is None else _Together(truth, shared_m)
+    together = None if truth is None else _Together(truth, shared_m)
     out = []
     for t, g, a, b, t_last in raw:
         if any(g2 != g and abs(t2 - t) <= ex_ns for t2, g2 in by_pair.get((b, a), ())):  # (another person: one
@@ -125,7 +125,7 @@ def id_switch_causes(matches: FrameMatches, tracks: Iterable[TrackState | Track]
             if a in life and life[a][1] <= t + end_ns:
                 cause = "reborn"
             else:
-                cause = "shared" if _shared(matches, by_person, t, t_last, g, a, shared_ns, near) else "new_track"
+                cause = "shared" if _shared(matches, by_person, t, t_last, g, a, shared_ns, together) else "new_track"
         else:
             cause = "takeover"
         out.append(IdSwitch(t, g, a, b, t_last, cause))
