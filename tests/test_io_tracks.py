@@ -243,6 +243,14 @@ def test_read_mot_pets_detections() -> None:
     np.testing.assert_allclose(small.boxes_ltwh, det.boxes_ltwh * 0.625)
     centres = small.boxes_xyxy.reshape(-1, 2, 2).mean(axis=1)
     assert np.all((centres >= 0) & (centres <= [480, 360]))
+    # select keeps every column with its row: the confident boxes are the file's lines with conf >= 0.99
+    lines = [ln.split(",") for ln in PETS_DET.read_text().split()]
+    sure = det.select(det.conf >= 0.99)
+    assert len(sure) == sum(float(ln[6]) >= 0.99 for ln in lines) > 0
+    assert np.all(sure.conf >= 0.99)
+    assert sure.extra.shape == (len(sure), det.extra.shape[1])
+    np.testing.assert_array_equal(sure.boxes_ltwh, det.boxes_ltwh[det.conf >= 0.99])
+    np.testing.assert_array_equal(sure.frame, det.frame[det.conf >= 0.99])
 
 
 def test_read_mot_errors(tmp_path: Path) -> None:

@@ -1202,8 +1202,6 @@ def appearance(
     from unambiguous box continuity, so no annotation is needed (fusiontrack.eval.appearance). Prints the share
     of scores the right way round, the evidence, and the verdicts identity checks would have given.
     """
-    import dataclasses
-
     import numpy as np
 
     from .eval.appearance import neighbour_evidence
@@ -1226,8 +1224,7 @@ def appearance(
         if not keep.any():
             raise ConfigError(f"--min-score {min_score:g}: above every detection's score in {detections} "
                               f"({det.conf.min():g} to {det.conf.max():g})")
-        det = dataclasses.replace(det, frame=det.frame[keep], id=det.id[keep], boxes_ltwh=det.boxes_ltwh[keep],
-                                  conf=det.conf[keep], extra=det.extra[keep])
+        det = det.select(keep)
     reader = VideoReader(video, "camera", fps=1.0)  # (times are not used: frames are counted)
     with reader:
         _check_detections(det, reader.width, reader.height, video)

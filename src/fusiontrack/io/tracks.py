@@ -398,6 +398,11 @@ class MotBoxes:
         """The same boxes in an image resized by ``factor`` (e.g. 0.625 for PETS 768x576 -> 480x360)."""
         return dataclasses.replace(self, boxes_ltwh=self.boxes_ltwh * factor)
 
+    def select(self, rows: np.ndarray) -> MotBoxes:
+        """The boxes of ``rows`` (a boolean mask or indices), every column kept with them."""
+        return dataclasses.replace(self, frame=self.frame[rows], id=self.id[rows], boxes_ltwh=self.boxes_ltwh[rows],
+                                   conf=self.conf[rows], extra=self.extra[rows])
+
     def rows_at(self, frame: int) -> np.ndarray:
         """Indices of the rows of one frame, ``(k,) int64``."""
         return np.flatnonzero(self.frame == frame)
