@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
 from pathlib import Path
 
@@ -527,8 +528,17 @@ def test_a_silent_scanner_does_not_stop_tracking() -> None:
     def mutate(k: int, name: str, scan: LaserScan) -> LaserScan | None:
         return None if name == "laser_b" and k >= 30 else scan  # laser_b goes silent for good
 
-    out, pos, _ = _run_room(150, mutate)
+    out, pos, det = _run_room(150, mutate)
     _assert_one_track_throughout(out, pos)
+    # the states name the scanners that saw the walker: both corners while both scan (one leg may hide the other
+    # from one of them, never the walker), only laser_a once laser_b's last scan is older than max_age_s
+    quiet_k = 30 + math.ceil(det.max_age_s * 1e9 / FRAME_NS) + 1
+    before = [s.sensors for states in out[10:30] for s in states if s.sensors]
+    after = [s.sensors for states in out[quiet_k:] for s in states if s.sensors]
+    assert len(before) >= 15
+    assert len(after) >= 100
+    assert all(x == ("laser_a", "laser_b") for x in before)
+    assert all(x == ("laser_a",) for x in after)
 
 
 def test_out_of_order_scans_do_not_stop_tracking() -> None:
@@ -662,7 +672,7 @@ def _car_and_walker(vehicles: bool) -> tuple[list[list[TrackState]], np.ndarray,
         side = c + np.column_stack([np.linspace(-2.2, 2.2, 40), np.full(40, -0.9)])
         rigid = Detection(k * FRAME_NS, "laser", position_m=c, features={
             "feet_m": np.stack([c, c]), "inter_feet_m": np.asarray(0.0), "one_foot": np.asarray(True),
-            "points_m": side, "rigid": np.asarray(True)})
+            "points_m": side, "rigid": np.asarray(True), "scanners": np.array(["laser_b"])})
         out.append(trk.step(k * FRAME_NS, [_detection(k * FRAME_NS, feet[k], rng), rigid]))
     return out, car, pos, trk
 
@@ -676,6 +686,9 @@ def test_a_car_is_followed_with_constant_velocity_and_its_own_id() -> None:
     assert {s.track_id for s in on_walker} == {on_walker[0].track_id} != {on_car[0].track_id}
     late = [s for s in on_car if s.t_ns >= 25 * FRAME_NS]
     assert np.abs(np.array([s.velocity_mps for s in late]) - [8.0, 0.0]).max() < 1.0
+    # what confirmed them: the car's detections name their scanner; the walker's name none (the tracker's sensor)
+    assert {s.sensors for s in on_car} == {("laser_b",)}
+    assert {s.sensors for s in on_walker} == {("laser",)}
 
 
 def test_vehicle_tracks_are_counted_and_named_apart_from_people() -> None:

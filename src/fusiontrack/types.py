@@ -570,7 +570,8 @@ class TrackState:
     box_px : (4,) float64 or None
         Image box in ``camera`` when the track is (also) tracked in an image.
     sensors : tuple[str, ...]
-        The sensors whose measurements confirmed this step (empty while coasting).
+        The sensors whose measurements confirmed this step (empty while coasting): of a laser track, the
+        scanners that saw the person (e.g. ``("laser_0", "laser_1")``), then the camera if its image was used.
     """
 
     t_ns: int

@@ -183,6 +183,8 @@ class LaserPeopleDetector:
             raise ValueError("scanners: expected a non-empty mapping of sensor name -> laser2world")
         self._scanners = {str(name): _Scanner(*planar_pose(T, f"scanners[{name!r}]"))
                           for name, T in scanners.items()}
+        if len(self._scanners) > 62:  # (each detection's scanners are a bit mask of 64-bit integers)
+            raise ValueError(f"scanners: at most 62, got {len(self._scanners)}")
         self._bg_args = {"alpha": alpha, "beta": beta, "tau_fg_m": tau_fg_m, "n_init": n_init, "init": init,
                          "bin_m": bin_m, "gamma": gamma}
         for name, v in (("min_cluster_points", min_cluster_points), ("min_segment_points", min_segment_points)):
@@ -225,6 +227,7 @@ class LaserPeopleDetector:
             raise ValueError(f"max_age_s: expected a finite value >= 0 s, got {max_age_s}")
         self._max_age_ns = round(self.max_age_s * 1e9)
         self.sensor = str(sensor)
+        self._names_of_mask: dict[int, np.ndarray] = {}  # scanner bit mask -> names (_scanner_sets)
         self.dropped_scans: dict[str, int] = dict.fromkeys(self._scanners, 0)
         """Scans dropped per scanner: out of order, or without usable beam angles."""
         self._warned: set[str] = set()
@@ -491,17 +494,35 @@ class LaserPeopleDetector:
         :meth:`foreground_points`), the two-feet :class:`Segments` of the points that are not part of a rigid
         object (``labels`` and ``foot`` over all ``n`` points, ``-1`` on the rigid objects'), and each point's
         rigid object (``-1`` for none) with their number."""
-        points, _, rigid, cluster = self._pooled(t_ns)
+        points, _, seg, obj, k = self._objects(t_ns)
+        return points, seg, obj, k
+
+    def _objects(self, t_ns: int) -> tuple[np.ndarray, np.ndarray, Segments, np.ndarray, int]:
+        """:meth:`objects` with each point's scanner (index into :attr:`scanners`) after the points."""
+        points, owner, rigid, cluster = self._pooled(t_ns)
         obj, k = self.rigid_objects(points, rigid, cluster)
         if k == 0:
-            return points, self.segment(points), obj, 0
+            return points, owner, self.segment(points), obj, 0
         free = np.flatnonzero(obj < 0)
         seg = self.segment(points[free])
         labels = np.full(len(points), -1, np.int64)
         labels[free] = seg.labels
         foot = np.full(len(points), -1, seg.foot.dtype)
         foot[free] = seg.foot
-        return points, dataclasses.replace(seg, labels=labels, foot=foot), obj, k
+        return points, owner, dataclasses.replace(seg, labels=labels, foot=foot), obj, k
+
+    def _scanner_sets(self, groups: np.ndarray, owner: np.ndarray, n: int) -> list[np.ndarray]:
+        """For each of ``n`` groups (``groups`` per point, ``-1`` for none), the names of the scanners whose points
+        it holds, sorted (one read-only array per distinct set, shared)."""
+        on = groups >= 0
+        mask = np.zeros(n, np.int64)
+        np.bitwise_or.at(mask, groups[on], np.left_shift(1, owner[on]))
+        names = self._names_of_mask
+        for m in set(mask.tolist()) - names.keys():
+            a = np.array(sorted(s for i, s in enumerate(self._scanners) if m >> i & 1), dtype=str)
+            a.flags.writeable = False
+            names[m] = a
+        return [names[m] for m in mask.tolist()]
 
     def segments(self, t_ns: int) -> tuple[np.ndarray, Segments]:
         """The two-feet part of :meth:`objects`: the pooled points ``(n, 2)`` and their :class:`Segments` (the
@@ -523,13 +544,14 @@ class LaserPeopleDetector:
         ``min_sigma_m**2 I`` + the points' sample covariance, ``sensor`` = :attr:`sensor`, ``cls`` unknown
         (the classifier decides), and features ``"feet_m"`` (2, 2), ``"points_m"`` (k, 2),
         ``"inter_feet_m"`` () float, ``"one_foot"`` () bool, ``"mode_m"`` (2,) the mean-shift mode, ``"rigid"``
-        () bool. The rigid objects (bicycles, cars: ``"rigid"`` true) come after the two-feet segments; their
-        position is the centre of the smallest rectangle around their points (``cv2.minAreaRect``), their
-        covariance ``min_sigma_m**2 I`` + the points' second moments about it, and their feet and mode are the
-        centre (no feet).
+        () bool, ``"scanners"`` (s,) str the names of the scanners whose points it holds, sorted (what
+        ``TrackState.sensors`` names when it confirms a track). The rigid objects (bicycles, cars: ``"rigid"``
+        true) come after the two-feet segments; their position is the centre of the smallest rectangle around
+        their points (``cv2.minAreaRect``), their covariance ``min_sigma_m**2 I`` + the points' second moments
+        about it, and their feet and mode are the centre (no feet).
         """
         t_ns = int(t_ns)
-        points, seg, obj, n_obj = self.objects(t_ns)
+        points, owner, seg, obj, n_obj = self._objects(t_ns)
         k = len(seg)
         out = []
         eye = self.min_sigma_m**2 * np.eye(2)
@@ -537,20 +559,22 @@ class LaserPeopleDetector:
             on = np.flatnonzero(seg.labels >= 0)
             order = on[np.argsort(seg.labels[on], kind="stable")]
             groups = np.split(points[order], np.cumsum(seg.n_points)[:-1])
+            scanners = self._scanner_sets(seg.labels, owner, k)
             cov = seg.covariances_m2 + eye
             no = np.asarray(False)
             out = [Detection(t_ns, self.sensor, position_m=seg.centres_m[j], covariance_m2=cov[j],
                              features={"feet_m": seg.feet_m[j], "points_m": groups[j],
                                        "inter_feet_m": np.asarray(seg.inter_feet_m[j]),
                                        "one_foot": np.asarray(seg.one_foot[j]), "mode_m": seg.modes_m[j],
-                                       "rigid": no})
+                                       "rigid": no, "scanners": scanners[j]})
                    for j in range(k)]
         if n_obj:
             on = np.flatnonzero(obj >= 0)
             order = on[np.argsort(obj[on], kind="stable")]
             groups = np.split(points[order], np.cumsum(np.bincount(obj[on], minlength=n_obj))[:-1])
+            scanners = self._scanner_sets(obj, owner, n_obj)
             yes, zero, one = np.asarray(True), np.asarray(0.0), np.asarray(True)
-            for g in groups:
+            for g, sc in zip(groups, scanners, strict=True):
                 # the centre of the smallest rectangle around the points: the vehicle's centre when its sides are
                 # seen all round, not pulled towards the nearer scanner's denser points as the mean is
                 m = g.mean(axis=0)  # (about the mean: float32 world coordinates far from the origin are coarse)
@@ -558,7 +582,7 @@ class LaserPeopleDetector:
                 d = g - c
                 out.append(Detection(t_ns, self.sensor, position_m=c, covariance_m2=d.T @ d / len(g) + eye,
                                      features={"feet_m": np.stack([c, c]), "points_m": g, "inter_feet_m": zero,
-                                               "one_foot": one, "mode_m": c, "rigid": yes}))
+                                               "one_foot": one, "mode_m": c, "rigid": yes, "scanners": sc}))
         return out
 
 

@@ -119,20 +119,27 @@ class CVKalmanTracker:
             self._x, self._P = kalman.predict(self._x, self._P, F, Q)
         taken = np.zeros(k, bool)
         meas = np.full((n, 2), np.nan)
+        seen, none = (self.sensor,), ()
+        # what confirmed each detection: the scanners whose points it holds (a laser detector's "scanners"), else
+        # this tracker's sensor
+        by = [seen if (sc := d.features.get("scanners")) is None or not sc.size else tuple(sc.tolist())
+              for d in detections]
+        seen_by = [none] * n
         if n and k:
             cost = np.linalg.norm(self._x[:, None, 0:2] - z[None, :, :], axis=2)
             pairs, _, _ = hungarian(cost, gate=self.gate_m)
             meas[pairs[:, 0]] = z[pairs[:, 1]]
             taken[pairs[:, 1]] = True
+            for i, j in pairs.tolist():
+                seen_by[i] = by[j]
         updated = ~np.isnan(meas[:, 0])
         if updated.any():
             self._x, self._P = kalman.update(self._x, self._P, meas, R=self.r_m**2)
             self._seen[updated] = t_ns
         frame_ns = self.frame_s * 1e9
         dead = (t_ns - self._seen) > round(self.n_miss * frame_ns)
-        seen, none = (self.sensor,), ()
         states = [_fast_state(t_ns, self.sensor, int(self._id[i]), self._x[i, 0:2], self._x[i, 2:4], _NONCORRELATED,
-                              seen if updated[i] else none, self._P[i], cls=self.cls)
+                              seen_by[i], self._P[i], cls=self.cls)
                   for i in np.flatnonzero(~dead)]
         if dead.any():
             edge = self._edge(self._x[dead, 0:2])
@@ -161,7 +168,7 @@ class CVKalmanTracker:
                 self.events.append(Event(int(cd.first_t[c]), self.sensor, "appear" if cd.edge[c] else "born", t_ns,
                                          position_m=cd.first_pos[c].copy(), track_ids=(tid,)))
                 states.append(TrackState(t_ns, self.sensor, tid, x0[0:2], x0[2:4], covariance=P0, cls=self.cls,
-                                         situation=Situation.NONCORRELATED, sensors=(self.sensor,)))
+                                         situation=Situation.NONCORRELATED, sensors=by[int(free[cd.det[c]])]))
             self._cand.pop(ready)
         return states
 

@@ -351,8 +351,10 @@ class TrackerParams:
     vehicle_n_miss : int
         Frames a vehicle track coasts without a detection (25).
     sensor : str
-        ``TrackState.sensor``, ``Event.sensor`` and what ``TrackState.sensors`` names when a detection
-        confirmed the track.
+        ``TrackState.sensor`` and ``Event.sensor``. ``TrackState.sensors`` names the scanners whose points the
+        detections that confirmed the step hold (the :class:`~fusiontrack.laser.LaserPeopleDetector`'s
+        ``scanners`` feature: with two scanners, which of them saw the person), and this name for a detection
+        without that feature.
     """
 
     n_particles: int = 100
@@ -497,14 +499,16 @@ def area_polygon(area_m: Any) -> np.ndarray | None:
 @dataclass(frozen=True, slots=True)
 class DetectionArrays:
     """The laser detections of one step as arrays: ``centres (n, 2)``, ``feet (n, 2, 2)``, ``inter_feet (n,)``,
-    ``one_foot (n,)``, and ``points`` (each detection's ``points_m`` feature ``(k, 2)``, or ``None``). A detection
-    without feet features has both feet at its centre (one foot)."""
+    ``one_foot (n,)``, ``points`` (each detection's ``points_m`` feature ``(k, 2)``, or ``None``) and ``scanners``
+    (each detection's ``scanners`` feature as a tuple of names, or ``None``; ``()`` when no detection has one). A
+    detection without feet features has both feet at its centre (one foot)."""
 
     centres: np.ndarray
     feet: np.ndarray
     inter_feet: np.ndarray
     one_foot: np.ndarray
     points: tuple[np.ndarray | None, ...] = ()
+    scanners: tuple[tuple[str, ...] | None, ...] = ()
 
     def __len__(self) -> int:
         return int(self.centres.shape[0])
@@ -521,6 +525,7 @@ def detection_arrays(detections: Sequence[Detection]) -> DetectionArrays:
     inter_l: list[Any] = []
     one_l: list[Any] = []
     points: list[np.ndarray | None] = []
+    scanners: list[tuple[str, ...] | None] = []
     all_feet = True
     for d in detections:  # one pass over the detections (hot path)
         if d.position_m is None:
@@ -535,7 +540,10 @@ def detection_arrays(detections: Sequence[Detection]) -> DetectionArrays:
         one_l.append(f.get("one_foot", False))
         pts = f.get("points_m")
         points.append(pts if pts is not None and pts.ndim == 2 and pts.shape[1] == 2 else None)
+        sc = f.get("scanners")
+        scanners.append(tuple(sc.tolist()) if sc is not None and sc.size else None)
     k = len(centres_l)
+    by = tuple(scanners) if any(s is not None for s in scanners) else ()
     if k == 0:
         return _NO_DETECTIONS
     centres = np.array(centres_l)
@@ -556,12 +564,13 @@ def detection_arrays(detections: Sequence[Detection]) -> DetectionArrays:
         inter = np.where(one, 0.0, inter)
     if (math.isfinite(np.add.reduce(centres, axis=None)) and math.isfinite(np.add.reduce(feet, axis=None))) or (
             _all(np.isfinite(centres)) and _all(np.isfinite(feet))):  # the usual case: every row ok
-        return DetectionArrays(centres, feet, inter, one, tuple(points))
+        return DetectionArrays(centres, feet, inter, one, tuple(points), by)
     ok = np.isfinite(centres).all(axis=1) & np.isfinite(feet).all(axis=(1, 2))
     if ok.all():
-        return DetectionArrays(centres, feet, inter, one, tuple(points))
+        return DetectionArrays(centres, feet, inter, one, tuple(points), by)
     return DetectionArrays(centres[ok], feet[ok], inter[ok], one[ok],
-                           tuple(pt for pt, good in zip(points, ok, strict=True) if good))
+                           tuple(pt for pt, good in zip(points, ok, strict=True) if good),
+                           tuple(s for s, good in zip(by, ok, strict=True) if good) if by else ())
 
 
 _NO_DETECTIONS = DetectionArrays(np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0), np.zeros(0, bool), ())
@@ -698,6 +707,7 @@ class _Merged:
     # One-segment frames since multi_last whose leg blobs are not counted yet: (time, points), oldest first.
     # They are counted only when multi_last is old enough for the single-person rule (see _settle_multi).
     unchecked: list[tuple[int, np.ndarray]] = field(default_factory=list)
+    seen_by: tuple[str, ...] = ()  # the sensors of the detections that last confirmed it (TrackState.sensors)
 
     @property
     def ids(self) -> list[int]:
@@ -1357,6 +1367,7 @@ class LaserPeopleTracker:
             m.correct(points, z, dt, p.member_alpha, p.member_beta, p.member_min_gap_m, frame_s=p.frame_s)
             m.x, m.P = _merged_kalman_update(m.x, m.P, z, p.merged_r_m**2)
             m.seen = t_ns
+            m.seen_by = self._seen_by(det, js_l)
             sensed_m[i] = True
             if points is not None and i not in split_now:  # one person's legs only, for a while: dissolve
                 if js.size >= 2:
@@ -1438,6 +1449,8 @@ class LaserPeopleTracker:
         # ---- outputs of the old rows that live on
         states: list[TrackState] = []
         sensor, sensors = p.sensor, self._sensors
+        by = det.scanners  # (the scanners of each detection, if the detector names them)
+        aw_l = aw.tolist() if by else ()
         appear_ns = p.appear_window_s * 1e9
         # (Python scalars from tolist(): the same values, without numpy scalar indexing per row)
         w_lab_l, id_l, born_edge_l, born_l, upd_l = (w_labels.tolist(), self._id.tolist(), self._born_edge.tolist(),
@@ -1456,8 +1469,8 @@ class LaserPeopleTracker:
                 sit = _APPEARING
             if (lab == _CORRELATED or tid in corr) and lab != _COASTING and lab != _DISAPPEARING:
                 self._correlated_step(tid, t_ns, lab == _CORRELATED, pos_w[row])
-            states.append(_fast_state(t_ns, sensor, tid, pos_f[row], vel_f[row], sit, sensors if upd_l[row] else (),
-                                      frozen=True))
+            seen = (by[aw_l[row]] or sensors if by else sensors) if upd_l[row] else ()
+            states.append(_fast_state(t_ns, sensor, tid, pos_f[row], vel_f[row], sit, seen, frozen=True))
         for i in (~gone_m).nonzero()[0].tolist():
             m = merged[i]
             lab = int(labels[n_w + i])
@@ -1476,7 +1489,7 @@ class LaserPeopleTracker:
                 self._members_correlated(m, t_ns, seen_apart)
             for k, info in enumerate(m.info):
                 states.append(_fast_state(t_ns, sensor, info.track_id, mpos[k], mvel[k], sit,
-                                          sensors if sensed_m[i] else (), frozen=True))
+                                          m.seen_by if sensed_m[i] else (), frozen=True))
         for row in dead_w.nonzero()[0]:
             self._death_event(int(self._id[row]), int(self._seen[row]), t_ns, self._pos[row], bool(edge_t[row]))
         for i in dead_m.nonzero()[0]:
@@ -1496,11 +1509,11 @@ class LaserPeopleTracker:
             if self._corr:  # the merge step is a merged frame of their correlated runs
                 self._members_correlated(m, t_ns, False)
             for k, info in enumerate(m.info):
-                states.append(_fast_state(t_ns, sensor, info.track_id, m.pos[k], m.vel[k], _MERGED_S, sensors))
+                states.append(_fast_state(t_ns, sensor, info.track_id, m.pos[k], m.vel[k], _MERGED_S, m.seen_by))
         for spec in new_walkers:
+            seen = spec.pop("seen_by")
             self._add_walking(**spec)
-            states.append(_fast_state(t_ns, sensor, spec["track_id"], spec["pos"], spec["vel"], _NONCORRELATED_S,
-                                      sensors))
+            states.append(_fast_state(t_ns, sensor, spec["track_id"], spec["pos"], spec["vel"], _NONCORRELATED_S, seen))
 
         # ---- births (B7 rule 6): candidates from unclaimed detections
         if births_due:
@@ -1641,7 +1654,7 @@ class LaserPeopleTracker:
         centre = det.centres[j]
         r2 = p.merged_r_m**2
         out = _Merged(np.concatenate([centre, mvel.mean(axis=0)]), np.diag([r2, r2, 0.5**2, 0.5**2]), t_ns,
-                      mpos, mvel, info, multi_last=t_ns, formed_ns=t_ns)
+                      mpos, mvel, info, multi_last=t_ns, formed_ns=t_ns, seen_by=self._seen_by(det, (j,)))
         ids = tuple(sorted(out.ids))
         if self._held_splits.pop(frozenset(ids), None) is None:  # else: they had not really split
             self.events.append(Event(t_ns, p.sensor, "merge", t_ns, position_m=centre, track_ids=ids,
@@ -1685,7 +1698,8 @@ class LaserPeopleTracker:
                 r2 = p.merged_r_m**2
                 new_merged.append(_Merged(np.concatenate([det.centres[j], m.vel[ks].mean(axis=0)]),
                                           np.diag([r2, r2, 0.5**2, 0.5**2]), t_ns, m.pos[ks].copy(),
-                                          m.vel[ks].copy(), [m.info[k] for k in ks], multi_last=t_ns, formed_ns=t_ns))
+                                          m.vel[ks].copy(), [m.info[k] for k in ks], multi_last=t_ns, formed_ns=t_ns,
+                                          seen_by=self._seen_by(det, (j,))))
         ids = tuple(sorted(m.ids))  # held back for split_hold_s: a merge of the same people undoes it
         self._held_splits[frozenset(ids)] = Event(t_ns, p.sensor, "split", t_ns, position_m=m.x[0:2].copy(),
                                                   track_ids=ids, attributes={"parts": tuple(sorted(parts)), **how})
@@ -1779,14 +1793,15 @@ class LaserPeopleTracker:
                     self.events.append(Event(first_t, p.sensor, kind, t_ns, position_m=m.pos[q].copy(),
                                              track_ids=(info.track_id,)))
                     states.append(_fast_state(t_ns, p.sensor, info.track_id, m.pos[q], m.vel[q], _MERGED_S,
-                                              self._sensors))
+                                              m.seen_by))
                 continue
             tid = next(self._next_id)
             spec = self._new_walker(tid, det, j, v0, heading, t_ns, born_edge=edge)
+            seen = spec.pop("seen_by")
             self._add_walking(**spec)
             self.events.append(Event(first_t, p.sensor, kind, t_ns, position_m=first_pos.copy(), track_ids=(tid,)))
             states.append(_fast_state(t_ns, p.sensor, tid, spec["pos"], spec["vel"],
-                                      _APPEARING if edge else _NONCORRELATED_S, self._sensors))
+                                      _APPEARING if edge else _NONCORRELATED_S, seen))
         if ready.size:
             cd.pop(ready)
         if cd.glimpses and t_ns - cd.glimpses[0][1] > p.glimpse_s * 1e9:
@@ -1828,7 +1843,8 @@ class LaserPeopleTracker:
                 for _ in range(n)]
         r2 = p.merged_r_m**2
         return _Merged(np.concatenate([det.centres[j], v0]), np.diag([r2, r2, 0.5**2, 0.5**2]), t_ns, pos,
-                       np.repeat(np.asarray(v0, float)[None], n, axis=0), info, multi_last=t_ns, formed_ns=t_ns)
+                       np.repeat(np.asarray(v0, float)[None], n, axis=0), info, multi_last=t_ns, formed_ns=t_ns,
+                       seen_by=self._seen_by(det, (j,)))
 
     # ---------------------------------------------------------------------------------------------
     def _track_velocity(self, pos: np.ndarray, dt: float) -> None:
@@ -1919,7 +1935,18 @@ class LaserPeopleTracker:
                          period_sigma_s=p.init_period_sigma_s, stride_sigma_m=p.init_stride_sigma_m)
         return {"track_id": tid, "x": x[0], "pos": det.centres[j].copy(), "vel": np.array(v0, float),
                 "seen": t_ns, "standing": (speed < p.standing_speed_mps) if standing is None else standing,
-                "born": t_ns if born_ns is None else born_ns, "born_edge": born_edge}
+                "born": t_ns if born_ns is None else born_ns, "born_edge": born_edge,
+                "seen_by": self._seen_by(det, (j,))}
+
+    def _seen_by(self, det: DetectionArrays, js: Sequence[int]) -> tuple[str, ...]:
+        """``TrackState.sensors`` of a target confirmed by detections ``js``: the scanners whose points they hold
+        (their ``scanners`` feature, sorted by name), else :attr:`TrackerParams.sensor`."""
+        by = det.scanners
+        if not by:
+            return self._sensors
+        if len(js) == 1:
+            return by[js[0]] or self._sensors
+        return tuple(sorted({name for j in js for name in (by[j] or self._sensors)}))
 
     def _add_walking(self, *, track_id: int, x: np.ndarray, pos: np.ndarray, vel: np.ndarray, seen: int,
                      standing: bool, born: int, born_edge: bool) -> None:
