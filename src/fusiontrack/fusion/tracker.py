@@ -259,6 +259,9 @@ class FusionParams:
         re-identification (a lost candidate, or a live alternative): it never votes in an identity check, it
         draws its patches from a random stream of its own, and it is dropped when the target first learns as
         B15's learner (B15's starts afresh), so B15's classifiers and the checks are what they are without it.
+        (Kept instead, B15 training on from it, the crowds' exchanges were not fewer: over 72 runs (crowd, seeds
+        0-35, 30 s, draws 0 / 1) ID switches 70 / 71 -> 72 / 74, exchanges 10 / 28 -> 12 / 30; kept and voting in
+        the checks, 70 / 73, exchanges 10 / 30.)
         None: only B15's learners learn (seed 001: the camera is read only for targets that need it). Default 1.5 s,
         since the identity checks date an exchange by the tracks' motion: on ``benchmarks/fusion.py`` (seeds 0-2) it
         re-identifies the two reborn tracks left (crowd seed 0, groups seed 2), ID switches 6 -> 4 against
