@@ -371,6 +371,34 @@ def test_a_merged_pair_seen_as_two_is_correlated_while_its_split_waits() -> None
     assert {s.track_id for s in trk.step(n * FRAME_NS, [])} == {1, 2}
 
 
+def test_a_merged_pair_seen_apart_names_each_members_own_scanner() -> None:
+    """The pair above, walker 0 seen by laser_a alone and walker 1 by laser_b alone: while merged (one segment of
+    both scanners' points) both members name both; while the merged target holds their two segments, each member
+    names the scanner of its own segment (not the target's two)."""
+    rng = np.random.default_rng(5)
+    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0)
+    n = 4 * 25
+    wide, _ = _parallel_walkers(n, 1.0)
+    close, _ = _parallel_walkers(n, 0.5)
+    fused, apart = [], []
+    for k in range(n):
+        dets = _merged_then_close(k, wide, close, rng)
+        names = [["laser_a", "laser_b"]] if len(dets) == 1 else [["laser_a"], ["laser_b"]]
+        dets = [Detection(d.t_ns, d.sensor, position_m=d.position_m, features={**d.features, "scanners": np.array(x)})
+                for d, x in zip(dets, names, strict=True)]
+        for st in trk.step(k * FRAME_NS, dets):
+            truth = close[:, k] if 45 <= k < 70 else wide[:, k]
+            walker = int(np.argmin(np.linalg.norm(truth - st.position_m, axis=1)))
+            if 25 <= k < 45:
+                fused.append(st.sensors)
+            elif 48 <= k < 70:
+                assert st.situation == Situation.CORRELATED  # (members of the merged target, seen apart)
+                apart.append((st.sensors, ("laser_a",) if walker == 0 else ("laser_b",)))
+    assert fused == [("laser_a", "laser_b")] * 40
+    assert len(apart) == 44
+    assert all(got == want for got, want in apart)
+
+
 def test_a_merged_pair_seen_apart_beside_a_bystander_is_correlated() -> None:
     """As above, but while the pair walks 0.5 m apart (each its own segment) it passes a standing bystander 0.55 m
     beside the nearer walker: that walker's segment is in the bystander's gate too, so the merged target's gate no
@@ -672,7 +700,7 @@ def _car_and_walker(vehicles: bool) -> tuple[list[list[TrackState]], np.ndarray,
         side = c + np.column_stack([np.linspace(-2.2, 2.2, 40), np.full(40, -0.9)])
         rigid = Detection(k * FRAME_NS, "laser", position_m=c, features={
             "feet_m": np.stack([c, c]), "inter_feet_m": np.asarray(0.0), "one_foot": np.asarray(True),
-            "points_m": side, "rigid": np.asarray(True), "scanners": np.array(["laser_b"])})
+            "points_m": side, "rigid": np.asarray(True), "scanners": "laser_b"})  # (one name, as a plain str)
         out.append(trk.step(k * FRAME_NS, [_detection(k * FRAME_NS, feet[k], rng), rigid]))
     return out, car, pos, trk
 

@@ -183,8 +183,6 @@ class LaserPeopleDetector:
             raise ValueError("scanners: expected a non-empty mapping of sensor name -> laser2world")
         self._scanners = {str(name): _Scanner(*planar_pose(T, f"scanners[{name!r}]"))
                           for name, T in scanners.items()}
-        if len(self._scanners) > 62:  # (each detection's scanners are a bit mask of 64-bit integers)
-            raise ValueError(f"scanners: at most 62, got {len(self._scanners)}")
         self._bg_args = {"alpha": alpha, "beta": beta, "tau_fg_m": tau_fg_m, "n_init": n_init, "init": init,
                          "bin_m": bin_m, "gamma": gamma}
         for name, v in (("min_cluster_points", min_cluster_points), ("min_segment_points", min_segment_points)):
@@ -227,7 +225,7 @@ class LaserPeopleDetector:
             raise ValueError(f"max_age_s: expected a finite value >= 0 s, got {max_age_s}")
         self._max_age_ns = round(self.max_age_s * 1e9)
         self.sensor = str(sensor)
-        self._names_of_mask: dict[int, np.ndarray] = {}  # scanner bit mask -> names (_scanner_sets)
+        self._names_of_set: dict[tuple[bool, ...], np.ndarray] = {}  # scanners' flags -> names (_scanner_sets)
         self.dropped_scans: dict[str, int] = dict.fromkeys(self._scanners, 0)
         """Scans dropped per scanner: out of order, or without usable beam angles."""
         self._warned: set[str] = set()
@@ -515,14 +513,17 @@ class LaserPeopleDetector:
         """For each of ``n`` groups (``groups`` per point, ``-1`` for none), the names of the scanners whose points
         it holds, sorted (one read-only array per distinct set, shared)."""
         on = groups >= 0
-        mask = np.zeros(n, np.int64)
-        np.bitwise_or.at(mask, groups[on], np.left_shift(1, owner[on]))
-        names = self._names_of_mask
-        for m in set(mask.tolist()) - names.keys():
-            a = np.array(sorted(s for i, s in enumerate(self._scanners) if m >> i & 1), dtype=str)
-            a.flags.writeable = False
-            names[m] = a
-        return [names[m] for m in mask.tolist()]
+        k = len(self._scanners)
+        # which scanners each group has points of: (n, k)
+        has = np.bincount(groups[on] * k + owner[on], minlength=n * k).reshape(n, k) > 0
+        names, out = self._names_of_set, []
+        for key in map(tuple, has.tolist()):
+            a = names.get(key)
+            if a is None:
+                a = names[key] = np.array(sorted(s for s, yes in zip(self._scanners, key, strict=True) if yes), str)
+                a.flags.writeable = False
+            out.append(a)
+        return out
 
     def segments(self, t_ns: int) -> tuple[np.ndarray, Segments]:
         """The two-feet part of :meth:`objects`: the pooled points ``(n, 2)`` and their :class:`Segments` (the

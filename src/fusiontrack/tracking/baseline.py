@@ -122,8 +122,8 @@ class CVKalmanTracker:
         seen, none = (self.sensor,), ()
         # what confirmed each detection: the scanners whose points it holds (a laser detector's "scanners"), else
         # this tracker's sensor
-        by = [seen if (sc := d.features.get("scanners")) is None or not sc.size else tuple(sc.tolist())
-              for d in detections]
+        by = [seen if (sc := d.features.get("scanners")) is None or not sc.size
+              else tuple(map(str, sc.reshape(-1).tolist())) for d in detections]
         seen_by = [none] * n
         if n and k:
             cost = np.linalg.norm(self._x[:, None, 0:2] - z[None, :, :], axis=2)

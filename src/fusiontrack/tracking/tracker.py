@@ -541,7 +541,7 @@ def detection_arrays(detections: Sequence[Detection]) -> DetectionArrays:
         pts = f.get("points_m")
         points.append(pts if pts is not None and pts.ndim == 2 and pts.shape[1] == 2 else None)
         sc = f.get("scanners")
-        scanners.append(tuple(sc.tolist()) if sc is not None and sc.size else None)
+        scanners.append(tuple(map(str, sc.reshape(-1).tolist())) if sc is not None and sc.size else None)
     k = len(centres_l)
     by = tuple(scanners) if any(s is not None for s in scanners) else ()
     if k == 0:
@@ -708,6 +708,8 @@ class _Merged:
     # They are counted only when multi_last is old enough for the single-person rule (see _settle_multi).
     unchecked: list[tuple[int, np.ndarray]] = field(default_factory=list)
     seen_by: tuple[str, ...] = ()  # the sensors of the detections that last confirmed it (TrackState.sensors)
+    # seen as several detections: each member's, those of the detection nearest to it (else None: seen_by)
+    member_seen: list[tuple[str, ...]] | None = None
 
     @property
     def ids(self) -> list[int]:
@@ -1368,6 +1370,10 @@ class LaserPeopleTracker:
             m.x, m.P = _merged_kalman_update(m.x, m.P, z, p.merged_r_m**2)
             m.seen = t_ns
             m.seen_by = self._seen_by(det, js_l)
+            m.member_seen = None
+            if len(js_l) > 1 and det.scanners:  # seen apart: each member by the detection nearest to it
+                near = np.argmin(np.linalg.norm(m.pos[:, None] - det.centres[js][None], axis=2), axis=1)
+                m.member_seen = [self._seen_by(det, (js_l[q],)) for q in near.tolist()]
             sensed_m[i] = True
             if points is not None and i not in split_now:  # one person's legs only, for a while: dissolve
                 if js.size >= 2:
@@ -1488,8 +1494,9 @@ class LaserPeopleTracker:
             if sensed_m[i] and lab != _DISAPPEARING:  # members are correlated while they are seen apart
                 self._members_correlated(m, t_ns, seen_apart)
             for k, info in enumerate(m.info):
-                states.append(_fast_state(t_ns, sensor, info.track_id, mpos[k], mvel[k], sit,
-                                          m.seen_by if sensed_m[i] else (), frozen=True))
+                own = m.member_seen
+                seen = (m.seen_by if own is None or len(own) != len(m.info) else own[k]) if sensed_m[i] else ()
+                states.append(_fast_state(t_ns, sensor, info.track_id, mpos[k], mvel[k], sit, seen, frozen=True))
         for row in dead_w.nonzero()[0]:
             self._death_event(int(self._id[row]), int(self._seen[row]), t_ns, self._pos[row], bool(edge_t[row]))
         for i in dead_m.nonzero()[0]:
