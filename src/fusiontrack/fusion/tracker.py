@@ -217,7 +217,9 @@ class FusionParams:
         least this many times; otherwise its decision is to keep them [RECON: a target's first classifier is
         fitted at once on one image, often of the two people side by side; on 72 simulated runs (crowd and
         groups, seeds 0-35, 30 s) all 7 exchanges voted by such a classifier were wrong or unclear, and
-        requiring 2 updates took the fused ID switches of those runs from 70 to 60 (no other run changes)].
+        requiring 2 updates took the fused ID switches of those runs from 70 to 60 (no other run changes); checked
+        again later over 144 runs (crowd and groups, seeds 0-35, 30 s, draws 0 / 1): 1 instead of 2 gave 177 ID
+        switches against 173, three runs changed, two for the worse].
     check_voters : int
         A check exchanges the pair's identities only if at least this many of its two tracks' classifiers voted
         (were trained when it opened); otherwise its decision is to keep them [RECON: one classifier alone,
