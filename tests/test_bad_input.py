@@ -199,6 +199,11 @@ def test_an_unknown_key_is_named_beside_the_known_ones():
         parse_config({"sensors": {"l": {"kind": "laser", "topc": "/scan"}}})
     with pytest.raises(ConfigError, match=r"sensors\.l\.pose\.yaw: unknown key \(known: .*\byaw_deg\b"):
         parse_config({"sensors": {"l": {"kind": "laser", "topic": "/scan", "pose": {"yaw": 3}}}})
+    # a sensor's name is what tracks.csv lists, joined by "|", as confirming a step: refused in the file, not at the
+    # end of a run when the tracks are written
+    for bad in ("front|back", " front", ""):
+        with pytest.raises(ConfigError, match=r"pipeline\.toml: sensors: .*sensor name.*'\|'"):
+            parse_config({"sensors": {bad: {"kind": "laser", "topic": "/scan"}}}, "pipeline.toml")
     with pytest.raises(ConfigError, match=r"scene\.toml: scenario\.duration: unknown key \(known: .*\bduration_s\b"):
         parse_scenario({"scenario": {"duration": 10}}, "scene.toml")
 

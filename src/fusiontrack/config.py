@@ -30,7 +30,7 @@ from types import UnionType
 from typing import Annotated, Any, Union, get_args, get_origin
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator
 
 from .errors import ConfigError
 
@@ -123,6 +123,16 @@ class PipelineConfig(_Model):
     traffic: dict[str, Any] = Field(default_factory=dict)
     """The traffic pipeline's settings (``TrafficParams.from_mapping``: rate_hz, fusion, tracker, kalman, laser,
     camera; checked by it)."""
+
+    @field_validator("sensors")
+    @classmethod
+    def _sensor_names(cls, sensors: dict[str, SensorConfig]) -> dict[str, SensorConfig]:
+        # a name is what a track's steps say confirmed them: tracks.csv joins them with "|" and strips its fields
+        for name in sensors:
+            if not name.strip() or name != name.strip() or "|" in name:
+                raise ValueError(f"sensor name {name!r}: expected a name without '|' and without leading or trailing "
+                                 "spaces (tracks.csv lists a step's confirming sensors joined by '|')")
+        return sensors
 
     def laser_poses(self) -> dict[str, np.ndarray]:
         """topic -> laser2world ``(4, 4)`` of the lasers whose table gives a ``pose``: they override the
