@@ -340,16 +340,21 @@ def _merged_then_close(k: int, wide: np.ndarray, close: np.ndarray, rng: np.rand
     return [_detection(t_ns, np.array([p - FOOT_OFFSET, p + FOOT_OFFSET]), rng) for p in pos]
 
 
+def _merged_pair() -> tuple[LaserPeopleTracker, np.ndarray, np.ndarray, np.random.Generator]:
+    """A tracker of the room, the pair of :func:`_merged_then_close` 1 m and 0.5 m apart for 4 s, and its noise."""
+    n = 4 * 25
+    wide, _ = _parallel_walkers(n, 1.0)
+    close, _ = _parallel_walkers(n, 0.5)
+    return LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0), wide, close, np.random.default_rng(5)
+
+
 def test_a_merged_pair_seen_as_two_is_correlated_while_its_split_waits() -> None:
     """Two walkers 1 m apart are one segment for 1 s (merged), then each its own segment 0.5 m apart for 1 s (closer
     than split_min_m = 0.6: the split waits), then 1 m apart (split). While they are two segments inside one gate,
     each detected alone, B7 rule 3 makes them correlated: their states say so, and each has one correlated run that
     starts with that phase; they split only once apart, and keep their identities."""
-    rng = np.random.default_rng(5)
-    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0)
-    n = 4 * 25
-    wide, _ = _parallel_walkers(n, 1.0)
-    close, _ = _parallel_walkers(n, 0.5)
+    trk, wide, close, rng = _merged_pair()
+    n = wide.shape[1]
     events, sit_close = [], []
     for k in range(n):
         t_ns = k * FRAME_NS
@@ -375,11 +380,8 @@ def test_a_merged_pair_seen_apart_names_each_members_own_scanner() -> None:
     """The pair above, walker 0 seen by laser_a alone and walker 1 by laser_b alone: while merged (one segment of
     both scanners' points) both members name both; while the merged target holds their two segments, each member
     names the scanner of its own segment (not the target's two)."""
-    rng = np.random.default_rng(5)
-    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0)
-    n = 4 * 25
-    wide, _ = _parallel_walkers(n, 1.0)
-    close, _ = _parallel_walkers(n, 0.5)
+    trk, wide, close, rng = _merged_pair()
+    n = wide.shape[1]
     fused, apart = [], []
     for k in range(n):
         dets = _merged_then_close(k, wide, close, rng)
@@ -405,11 +407,8 @@ def test_a_merged_pair_seen_apart_beside_a_bystander_is_correlated() -> None:
     longer holds detections found by it alone (B7 rule 2's split condition fails; the split waits). It still
     holds a segment for each of its two members: they are seen apart, and their states say correlated (B7 rule 3),
     as the measurement truth, which sees each walker in a segment of its own, says. (Before: merged.)"""
-    rng = np.random.default_rng(5)
-    trk = LaserPeopleTracker(area_m=(0.0, 0.0, 12.0, 10.0), rng=0)
-    n = 4 * 25
-    wide, _ = _parallel_walkers(n, 1.0)
-    close, _ = _parallel_walkers(n, 0.5)
+    trk, wide, close, rng = _merged_pair()
+    n = wide.shape[1]
     bystander = np.array([4.8, 4.2])
     events, sit_shared = [], []
     for k in range(n):
